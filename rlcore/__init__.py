@@ -1,0 +1,18 @@
+"""rlcore: the small, tested reinforcement-learning library behind the course book.
+
+One idea per module (see the design card in the README):
+
+- :mod:`rlcore.envs`       environment construction and seeding on Gymnasium
+- :mod:`rlcore.render`     offscreen rollouts to frames and GIFs, headless GL selection
+- :mod:`rlcore.evaluate`   evaluation episodes and statistics over seeds
+- :mod:`rlcore.logger`     CSV progress logs
+- :mod:`rlcore.checkpoint` atomic save, ``weights_only=True`` load
+- :mod:`rlcore.plots`      learning curves with a band over seeds
+- :mod:`rlcore.runs`       the output directory of one training run
+- :mod:`rlcore.tabular`    tabular Q-learning and SARSA
+- :mod:`rlcore.algos`      the registry of algorithms the command line knows
+
+Modules are imported on demand (``import rlcore.envs``) so that ``import rlcore`` stays cheap.
+"""
+
+__version__ = "0.1.0"

@@ -1,0 +1,109 @@
+"""Environment construction and seeding, on Gymnasium and its own wrappers.
+
+Every environment in the book is made here, so that every chapter and every algorithm gets the
+same things: a checked environment id (with suggestions when it is misspelled), episode statistics
+from :class:`gymnasium.wrappers.RecordEpisodeStatistics`, and seeded action/observation spaces.
+"""
+
+from __future__ import annotations
+
+import difflib
+from typing import Any
+
+import gymnasium as gym
+
+
+class UnknownEnvironmentError(ValueError):
+    """Raised for an environment id that Gymnasium does not know."""
+
+
+def registered_env_ids() -> list[str]:
+    """All environment ids registered with Gymnasium (including ``-v5`` MuJoCo tasks)."""
+    return sorted(gym.envs.registry.keys())
+
+
+def suggest_env_ids(env_id: str, n: int = 3) -> list[str]:
+    """Registered ids closest to ``env_id`` (case-insensitive), best first."""
+    ids = registered_env_ids()
+    by_lower = {i.lower(): i for i in ids}
+    close = difflib.get_close_matches(env_id.lower(), list(by_lower), n=n, cutoff=0.6)
+    return [by_lower[c] for c in close]
+
+
+def check_env_id(env_id: str) -> None:
+    """Raise :class:`UnknownEnvironmentError` if ``env_id`` is not registered, suggesting close ids."""
+    if env_id in gym.envs.registry:
+        return
+    suggestions = suggest_env_ids(env_id)
+    hint = f" Did you mean {' or '.join(repr(s) for s in suggestions)}?" if suggestions else ""
+    raise UnknownEnvironmentError(
+        f"Unknown environment id {env_id!r}.{hint} "
+        "Ids are case-sensitive and carry a version, e.g. 'Hopper-v5' or 'CartPole-v1'; "
+        "`python -c \"import gymnasium; print(*gymnasium.envs.registry, sep=chr(10))\"` lists them all."
+    )
+
+
+def make_env(
+    env_id: str,
+    seed: int | None = None,
+    render_mode: str | None = None,
+    record_stats: bool = True,
+    **gym_kwargs: Any,
+) -> gym.Env:
+    """Make one Gymnasium environment, the way every chapter does.
+
+    The id is checked first (a typo gets suggestions, not a registry traceback). Rendering to
+    ``rgb_array`` picks a headless OpenGL backend for MuJoCo. ``RecordEpisodeStatistics`` puts the
+    episode's return and length into ``info["episode"]`` when it ends. The action and observation
+    spaces are seeded with ``seed``; seed the first ``reset`` with the same number:
+    ``obs, info = env.reset(seed=seed)``.
+    """
+    check_env_id(env_id)
+    if render_mode == "rgb_array":
+        from rlcore.render import select_gl_backend
+
+        select_gl_backend()
+    env = gym.make(env_id, render_mode=render_mode, **gym_kwargs)
+    if record_stats:
+        env = gym.wrappers.RecordEpisodeStatistics(env)
+    if seed is not None:
+        env.action_space.seed(seed)
+        env.observation_space.seed(seed)
+    return env
+
+
+def make_vec_env(
+    env_id: str,
+    num_envs: int,
+    seed: int = 0,
+    vectorization_mode: str = "sync",
+    **gym_kwargs: Any,
+) -> gym.vector.VectorEnv:
+    """Make ``num_envs`` copies of an environment as a Gymnasium vector environment.
+
+    Each copy records its episode statistics. Seed the first reset with ``envs.reset(seed=seed)``:
+    Gymnasium then gives copy ``i`` the seed ``seed + i``.
+    """
+    check_env_id(env_id)
+    envs = gym.make_vec(
+        env_id,
+        num_envs=num_envs,
+        vectorization_mode=vectorization_mode,
+        wrappers=[gym.wrappers.RecordEpisodeStatistics],
+        **gym_kwargs,
+    )
+    envs.action_space.seed(seed)
+    envs.observation_space.seed(seed)
+    return envs
+
+
+def is_discrete(space: gym.Space) -> bool:
+    """True for a ``Discrete`` space."""
+    return isinstance(space, gym.spaces.Discrete)
+
+
+def space_shape(space: gym.Space) -> tuple[int, ...]:
+    """Shape of a space for a table: ``(n,)`` for ``Discrete(n)``, ``space.shape`` otherwise."""
+    if isinstance(space, gym.spaces.Discrete):
+        return (int(space.n),)
+    return tuple(space.shape)

@@ -1,0 +1,186 @@
+"""Offscreen rollouts of a policy to frames and to a GIF.
+
+MuJoCo draws with OpenGL. On a laptop or server with no screen it needs a *headless* backend, chosen
+with the ``MUJOCO_GL`` environment variable before MuJoCo is first imported: ``egl`` (Mesa's or
+NVIDIA's EGL) or ``osmesa`` (pure software). :func:`select_gl_backend` tries them in that order, each
+in a throw-away subprocess (a broken GL stack can crash the process that tries it), and keeps the
+first that works. When none works it raises :class:`HeadlessGLError` saying what to install.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+GL_BACKENDS = ("egl", "osmesa")
+
+# What each backend needs on Debian/Ubuntu.
+GL_PACKAGES = {
+    "egl": "libegl1 libegl-mesa0 libgl1-mesa-dri",
+    "osmesa": "libosmesa6",
+}
+
+_PROBE = """
+import mujoco
+ctx = mujoco.GLContext(64, 64)
+ctx.make_current()
+model = mujoco.MjModel.from_xml_string("<mujoco><worldbody><geom size='1'/></worldbody></mujoco>")
+mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+ctx.free()
+"""
+
+_selected: str | None = None
+
+
+class HeadlessGLError(RuntimeError):
+    """No headless OpenGL backend works, so MuJoCo cannot render offscreen."""
+
+
+def probe_gl_backend(backend: str, timeout: float = 120.0) -> tuple[bool, str]:
+    """Try to open a MuJoCo GL context with ``MUJOCO_GL=backend`` in a subprocess.
+
+    Returns ``(works, last line of the error)``.
+    """
+    env = dict(os.environ, MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend)
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, timeout=timeout
+        )
+    except subprocess.TimeoutExpired:
+        return False, f"timed out after {timeout:.0f} s"
+    lines = (proc.stderr or proc.stdout).strip().splitlines()
+    return proc.returncode == 0, (lines[-1] if lines else f"exit code {proc.returncode}")
+
+
+def _no_backend_message(tried: dict[str, str]) -> str:
+    reasons = "\n".join(f"  MUJOCO_GL={b}: {why}" for b, why in tried.items())
+    return (
+        "MuJoCo cannot render offscreen: no headless OpenGL backend works on this machine.\n"
+        f"Tried:\n{reasons}\n"
+        "To fix it, install one of them and try again:\n"
+        f"  EGL (recommended):  sudo apt-get install {GL_PACKAGES['egl']}   then MUJOCO_GL=egl\n"
+        f"  OSMesa (software):  sudo apt-get install {GL_PACKAGES['osmesa']}   then MUJOCO_GL=osmesa\n"
+        "On a machine with a screen you may also set MUJOCO_GL=glfw."
+    )
+
+
+def select_gl_backend(candidates: Sequence[str] | None = None) -> str:
+    """Pick a headless OpenGL backend for MuJoCo and put it in ``MUJOCO_GL``.
+
+    A ``MUJOCO_GL`` already set by the user is the only candidate tried. Otherwise ``egl`` then
+    ``osmesa``. The choice is remembered for the rest of the process (and inherited by child
+    processes through the environment). Call it before MuJoCo is imported; :func:`rlcore.envs.make_env`
+    does so whenever ``render_mode="rgb_array"``.
+    """
+    global _selected
+    if candidates is None:
+        if _selected is not None:
+            return _selected
+        user_choice = os.environ.get("MUJOCO_GL", "").strip().lower()
+        candidates = (user_choice,) if user_choice else GL_BACKENDS
+    tried: dict[str, str] = {}
+    for backend in candidates:
+        works, why = probe_gl_backend(backend)
+        if works:
+            _use_backend(backend)
+            return backend
+        tried[backend] = why
+    raise HeadlessGLError(_no_backend_message(tried))
+
+
+def _use_backend(backend: str) -> None:
+    # Gymnasium reads MUJOCO_GL when it opens its offscreen viewer, so setting it here reaches
+    # Gymnasium even if MuJoCo itself was imported earlier.
+    global _selected
+    os.environ["MUJOCO_GL"] = backend
+    os.environ.setdefault("PYOPENGL_PLATFORM", backend)
+    _selected = backend
+
+
+Policy = Callable[[Any], Any]
+
+
+def rollout_frames(
+    env_id: str,
+    policy: Policy | None = None,
+    max_frames: int = 200,
+    seed: int = 0,
+    width: int = 320,
+    height: int = 240,
+    env_kwargs: dict[str, Any] | None = None,
+    frame_skip: int = 1,
+) -> list[np.ndarray]:
+    """Run ``policy`` in a fresh ``env_id`` and return up to ``max_frames`` RGB frames.
+
+    ``policy`` maps an observation to an action; ``None`` means uniformly random actions (seeded).
+    When an episode ends before ``max_frames``, a new one starts, so short-lived bodies still fill
+    the GIF. MuJoCo tasks render at ``width`` x ``height``; other tasks at their own size.
+    ``frame_skip=k`` keeps every k-th step's frame (a smaller GIF of a longer stretch of motion).
+    """
+    if frame_skip < 1:
+        raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+    import gymnasium as gym
+
+    from rlcore.envs import make_env
+
+    kwargs = dict(env_kwargs or {})
+    spec = gym.spec(env_id) if env_id in gym.envs.registry else None
+    if spec is not None and "mujoco" in str(spec.entry_point):
+        kwargs.setdefault("width", width)
+        kwargs.setdefault("height", height)
+    env = make_env(env_id, seed=seed, render_mode="rgb_array", **kwargs)
+    try:
+        obs, _ = env.reset(seed=seed)
+        frames = [np.asarray(env.render())]
+        step = 0
+        while len(frames) < max_frames:
+            action = env.action_space.sample() if policy is None else policy(obs)
+            obs, _, terminated, truncated, _ = env.step(action)
+            step += 1
+            if step % frame_skip == 0:
+                frames.append(np.asarray(env.render()))
+            if terminated or truncated:
+                obs, _ = env.reset()
+        return frames
+    finally:
+        env.close()
+
+
+def frames_to_gif(frames: Sequence[np.ndarray], fps: int = 30) -> bytes:
+    """Encode RGB frames as an endlessly looping GIF and return its bytes."""
+    import imageio.v3 as iio
+
+    if len(frames) == 0:
+        raise ValueError("frames_to_gif needs at least one frame")
+    stack = np.stack([np.asarray(f, dtype=np.uint8) for f in frames])
+    buf = io.BytesIO()
+    iio.imwrite(buf, stack, extension=".gif", duration=1000 / fps, loop=0)
+    return buf.getvalue()
+
+
+def render_gif(
+    env_id: str,
+    policy: Policy | None = None,
+    max_frames: int = 200,
+    seed: int = 0,
+    fps: int = 30,
+    width: int = 320,
+    height: int = 240,
+    path: str | os.PathLike | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    frame_skip: int = 1,
+) -> bytes:
+    """Roll out ``policy`` offscreen and return the GIF's bytes (also written to ``path`` if given)."""
+    frames = rollout_frames(env_id, policy, max_frames, seed, width, height, env_kwargs, frame_skip)
+    data = frames_to_gif(frames, fps=fps)
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_bytes(data)
+    return data

@@ -1,0 +1,130 @@
+"""The output folder of one training run, and what it records about itself.
+
+``python -m rlcore train ... --out DIR`` writes::
+
+    DIR/config.json     the algorithm's Config, the environment id, seed and step budget
+    DIR/meta.json       the command, versions (Python, torch, Gymnasium, MuJoCo, NumPy, rlcore), git commit
+    DIR/progress.csv    one row per episode (or update), appended to on resume
+    DIR/checkpoint.pt   the latest checkpoint: the trained policy plus what a resume needs
+
+Every number the book shows can be traced back to these files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+class RunDir:
+    """Paths inside a run's output folder."""
+
+    def __init__(self, root: str | os.PathLike):
+        self.root = Path(root)
+
+    @property
+    def config(self) -> Path:
+        return self.root / "config.json"
+
+    @property
+    def meta(self) -> Path:
+        return self.root / "meta.json"
+
+    @property
+    def progress(self) -> Path:
+        return self.root / "progress.csv"
+
+    @property
+    def checkpoint(self) -> Path:
+        return self.root / "checkpoint.pt"
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write ``obj`` as indented JSON, atomically (temporary file, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    with os.fdopen(fd, "w") as f:
+        json.dump(obj, f, indent=2, sort_keys=True, default=str)
+        f.write("\n")
+    os.replace(tmp, path)
+
+
+def git_commit(cwd: str | os.PathLike | None = None) -> str | None:
+    """The current git commit of the rlcore checkout (``+dirty`` if it has changes), or None."""
+    cwd = cwd or Path(__file__).resolve().parent
+    try:
+        sha = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, timeout=10
+        )
+        if sha.returncode != 0:
+            return None
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=cwd, capture_output=True, text=True, timeout=10,
+        )
+        return sha.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def versions() -> dict[str, str]:
+    """Versions of the pieces a result depends on."""
+    import gymnasium
+    import torch
+
+    import rlcore
+
+    out = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "torch": torch.__version__,
+        "gymnasium": gymnasium.__version__,
+        "rlcore": rlcore.__version__,
+    }
+    try:
+        import mujoco
+
+        out["mujoco"] = mujoco.__version__
+    except ImportError:
+        pass
+    return out
+
+
+def run_metadata(**extra: Any) -> dict[str, Any]:
+    """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``."""
+    return {
+        "command": shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else None,
+        "versions": versions(),
+        "commit": git_commit(),
+        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count()},
+        "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        **extra,
+    }
+
+
+def config_dict(config: Any) -> dict[str, Any]:
+    """A dataclass Config as a JSON-ready dict."""
+    return dataclasses.asdict(config)
+
+
+def config_from_dict(cls: type, values: dict[str, Any]) -> Any:
+    """Rebuild a Config dataclass from :func:`config_dict`'s output, ignoring unknown keys."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in values.items() if k in names})
+
+
+def episode_seed(seed: int, episode: int) -> int:
+    """The reset seed of episode ``episode`` of a run seeded ``seed`` (independent of interruptions)."""
+    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])

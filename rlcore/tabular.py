@@ -1,0 +1,255 @@
+"""Tabular Q-learning and SARSA (chapter 1).
+
+The action-value table ``Q[s, a]`` is a NumPy array. Both methods move ``Q[s, a]`` a step ``alpha``
+toward a *TD target*; they differ only in which next action the target uses:
+
+- Q-learning (off-policy):  y = r + gamma * max_a' Q[s', a']
+- SARSA (on-policy):        y = r + gamma * Q[s', a'],  a' the action actually taken next
+
+At a terminal state there is no future, so y = r. A time limit (truncation) is *not* terminal: the
+target still bootstraps from s'.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from tqdm.auto import tqdm
+
+from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.envs import make_env
+from rlcore.logger import CSVLogger
+from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_json
+
+METHODS = ("q-learning", "sarsa")
+
+
+@dataclass
+class Config:
+    """Hyperparameters of tabular Q-learning and SARSA."""
+
+    method: str = "q-learning"
+    """Which update: ``"q-learning"`` (max over next actions) or ``"sarsa"`` (the next action taken)."""
+    alpha: float = 0.1
+    """Step size (learning rate) of each update."""
+    gamma: float = 0.99
+    """Discount factor."""
+    epsilon_start: float = 1.0
+    """Exploration rate of the epsilon-greedy behaviour policy at step 0."""
+    epsilon_end: float = 0.05
+    """Exploration rate after ``epsilon_decay_steps`` steps (and from then on)."""
+    epsilon_decay_steps: int = 10_000
+    """Steps over which epsilon falls linearly from start to end (0: constant ``epsilon_end``)."""
+    checkpoint_every: int = 10_000
+    """Write ``checkpoint.pt`` every this many steps (and always at the end or on Ctrl-C)."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments for ``gymnasium.make``, e.g. ``{"is_slippery": False}`` for FrozenLake."""
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if not 0 < self.alpha <= 1:
+            raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
+        if not 0 <= self.gamma <= 1:
+            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
+
+
+# --- the update rules, one small function each -------------------------------------------------
+
+
+def td_target(reward: float, next_value: float, gamma: float, terminated: bool) -> float:
+    """y = r + gamma * V(s'), with no bootstrap when s' is terminal (truncation still bootstraps)."""
+    return reward + (0.0 if terminated else gamma * next_value)
+
+
+def q_learning_update(
+    Q: np.ndarray, s: int, a: int, r: float, s_next: int, terminated: bool, alpha: float, gamma: float
+) -> float:
+    """Q[s,a] <- Q[s,a] + alpha * (r + gamma * max_a' Q[s',a'] - Q[s,a]); returns the TD error."""
+    td_error = td_target(r, Q[s_next].max(), gamma, terminated) - Q[s, a]
+    Q[s, a] += alpha * td_error
+    return float(td_error)
+
+
+def sarsa_update(
+    Q: np.ndarray, s: int, a: int, r: float, s_next: int, a_next: int, terminated: bool,
+    alpha: float, gamma: float,
+) -> float:
+    """Q[s,a] <- Q[s,a] + alpha * (r + gamma * Q[s',a'] - Q[s,a]); returns the TD error."""
+    td_error = td_target(r, Q[s_next, a_next], gamma, terminated) - Q[s, a]
+    Q[s, a] += alpha * td_error
+    return float(td_error)
+
+
+def epsilon_greedy(q_values: np.ndarray, epsilon: float, rng: np.random.Generator) -> int:
+    """With probability epsilon a uniformly random action, otherwise a greedy one (ties broken at random)."""
+    if rng.random() < epsilon:
+        return int(rng.integers(len(q_values)))
+    best = np.flatnonzero(q_values == q_values.max())
+    return int(best[0] if len(best) == 1 else rng.choice(best))
+
+
+def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
+    """Linear interpolation from ``start`` (t=0) to ``end`` (t >= duration)."""
+    if duration <= 0:
+        return end
+    return start + (end - start) * min(t / duration, 1.0)
+
+
+def greedy_policy(Q: np.ndarray) -> np.ndarray:
+    """The greedy action of every state, ``argmax_a Q[s, a]``."""
+    return Q.argmax(axis=1)
+
+
+class TabularPolicy:
+    """The deterministic greedy policy of a Q-table, callable on an observation."""
+
+    def __init__(self, Q: np.ndarray):
+        self.Q = np.asarray(Q)
+
+    def __call__(self, obs: Any) -> int:
+        return int(self.Q[int(obs)].argmax())
+
+
+# --- training -----------------------------------------------------------------------------------
+
+
+def check_spaces(env: gym.Env, env_id: str) -> tuple[int, int]:
+    """(number of states, number of actions); a clear error for non-tabular tasks."""
+    obs, act = env.observation_space, env.action_space
+    if not isinstance(obs, gym.spaces.Discrete) or not isinstance(act, gym.spaces.Discrete):
+        raise ValueError(
+            f"Tabular methods need discrete states and actions, but {env_id} has observation space "
+            f"{obs} and action space {act}. Try FrozenLake-v1, CliffWalking-v1 or Taxi-v3, or a deep "
+            "method (dqn for discrete actions, ddpg/ppo for continuous ones)."
+        )
+    return int(obs.n), int(act.n)
+
+
+@dataclass
+class Result:
+    """What :func:`train` returns: the Q-table and the per-episode log."""
+
+    Q: np.ndarray
+    episode_returns: np.ndarray
+    episode_lengths: np.ndarray
+    episode_end_steps: np.ndarray
+    steps: int
+
+
+def _state(env_id: str, config: Config, seed: int, step: int, episode: int, Q: np.ndarray,
+           rng: np.random.Generator, total_steps: int) -> dict[str, Any]:
+    return {
+        "algo": config.method, "env_id": env_id, "config": config_dict(config), "seed": seed,
+        "step": step, "episode": episode, "total_steps": total_steps, "complete": step >= total_steps,
+        "q": Q, "rng": rng.bit_generator.state,
+    }
+
+
+def train(
+    env_id: str,
+    config: Config | None = None,
+    steps: int = 50_000,
+    seed: int = 0,
+    out: str | Path | None = None,
+    progress: bool = False,
+) -> Result:
+    """Train a Q-table with Q-learning or SARSA for ``steps`` environment steps.
+
+    Each episode: reset, then repeat — act epsilon-greedily, step, update ``Q[s, a]`` toward its TD
+    target — until the episode terminates or is truncated. With ``out``, the run writes its config,
+    metadata, a per-episode ``progress.csv`` and ``checkpoint.pt`` there; if ``out`` already holds an
+    unfinished checkpoint of the same run, training resumes from it. Ctrl-C saves a checkpoint first.
+    """
+    config = config or Config()
+    env = make_env(env_id, seed=seed, **config.env_kwargs)
+    n_states, n_actions = check_spaces(env, env_id)
+    rng = np.random.default_rng(seed)
+    Q = np.zeros((n_states, n_actions))
+    step = episode = 0
+    returns: list[float] = []
+    lengths: list[int] = []
+    end_steps: list[int] = []
+    run = RunDir(out) if out is not None else None
+    log = None
+    if run is not None:
+        if run.checkpoint.exists():
+            ckpt = load_checkpoint(run.checkpoint)
+            if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != (config.method, env_id, seed):
+                raise ValueError(
+                    f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} (seed {ckpt.get('seed')}); "
+                    "choose another --out folder or delete it."
+                )
+            Q = ckpt["q"].numpy().copy()
+            step, episode = int(ckpt["step"]), int(ckpt["episode"])
+            rng.bit_generator.state = ckpt["rng"]
+        else:
+            write_json(run.config, {"algo": config.method, "env_id": env_id, "seed": seed,
+                                    "steps": steps, "config": config_dict(config)})
+            write_json(run.meta, run_metadata(algo=config.method, env_id=env_id, seed=seed, steps=steps))
+        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "epsilon"])
+
+    def checkpoint() -> None:
+        if run is not None:
+            save_checkpoint(run.checkpoint, _state(env_id, config, seed, step, episode, Q, rng, steps))
+
+    bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step",
+               desc=f"{config.method} {env_id}")
+    try:
+        while step < steps:
+            s, _ = env.reset(seed=episode_seed(seed, episode))
+            epsilon = linear_schedule(config.epsilon_start, config.epsilon_end, config.epsilon_decay_steps, step)
+            a = epsilon_greedy(Q[s], epsilon, rng)
+            ep_return, ep_len, done = 0.0, 0, False
+            while not done and step < steps:
+                s_next, r, terminated, truncated, _ = env.step(a)
+                step += 1
+                epsilon = linear_schedule(config.epsilon_start, config.epsilon_end, config.epsilon_decay_steps, step)
+                a_next = epsilon_greedy(Q[s_next], epsilon, rng)
+                if config.method == "q-learning":
+                    q_learning_update(Q, s, a, r, s_next, terminated, config.alpha, config.gamma)
+                else:
+                    sarsa_update(Q, s, a, r, s_next, a_next, terminated, config.alpha, config.gamma)
+                s, a = s_next, a_next
+                ep_return += float(r)
+                ep_len += 1
+                done = terminated or truncated
+                bar.update(1)
+                if run is not None and step % config.checkpoint_every == 0:
+                    checkpoint()
+            if done:
+                episode += 1
+                returns.append(ep_return)
+                lengths.append(ep_len)
+                end_steps.append(step)
+                if log is not None:
+                    log.log(episode=episode, step=step, episode_return=ep_return,
+                            episode_length=ep_len, epsilon=epsilon)
+                bar.set_postfix(ret=f"{ep_return:.1f}", eps=f"{epsilon:.2f}", refresh=False)
+    except KeyboardInterrupt:
+        checkpoint()
+        raise
+    finally:
+        bar.close()
+        env.close()
+        if log is not None:
+            log.close()
+    checkpoint()
+    return Result(Q, np.array(returns), np.array(lengths, dtype=int), np.array(end_steps, dtype=int), step)
+
+
+# --- what the command line needs ----------------------------------------------------------------
+
+
+def make_config(algo: str, **overrides: Any) -> Config:
+    """The Config for ``python -m rlcore train q-learning|sarsa``."""
+    return Config(method=algo, **overrides)
+
+
+def load_policy(ckpt: dict[str, Any]) -> TabularPolicy:
+    """The greedy policy stored in a checkpoint written by :func:`train`."""
+    return TabularPolicy(ckpt["q"].numpy())
