@@ -85,7 +85,7 @@ def plot_learning_curves(
     for label, seeds in runs.items():
         grid, ys = align_runs([(x, smooth(y, smoothing)) for x, y in seeds], num_points)
         mean, lo, hi = mean_and_band(ys, band)
-        (line,) = ax.plot(grid, mean, label=f"{label} ({len(seeds)} seeds)")
+        (line,) = ax.plot(grid, mean, label=f"{label} ({len(seeds)} seed{'s' if len(seeds) != 1 else ''})")
         ax.fill_between(grid, lo, hi, color=line.get_color(), alpha=0.2, linewidth=0)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)

@@ -1,0 +1,159 @@
+"""Command line: ``python -m rlcore train | evaluate | render``.
+
+    python -m rlcore train q-learning --env FrozenLake-v1 --steps 20000 --seed 0 --out runs/fl
+    python -m rlcore evaluate runs/fl --episodes 10      # last line: one JSON object
+    python -m rlcore render runs/fl --out fl.gif
+
+``train`` shows a progress bar; Ctrl-C saves a checkpoint, and running the same command again resumes.
+Errors a user can fix (an unknown environment or algorithm, a corrupt checkpoint, no headless GL)
+are printed as one clear message with exit code 2, not a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import typing
+from pathlib import Path
+from typing import Any
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+def _parse_value(text: str, annotation: Any) -> Any:
+    """Parse a ``--set key=value`` value as JSON where possible (numbers, true/false, dicts)."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        value = text
+    if annotation in (float, "float") and isinstance(value, int):
+        value = float(value)
+    return value
+
+
+def _overrides(config_cls: type, pairs: list[str]) -> dict[str, Any]:
+    hints = typing.get_type_hints(config_cls)
+    fields = {f.name for f in dataclasses.fields(config_cls)}
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        if "=" not in pair:
+            raise ValueError(f"--set expects key=value, got {pair!r}")
+        key, text = pair.split("=", 1)
+        key = key.strip().replace("-", "_")
+        if key not in fields:
+            raise ValueError(f"{config_cls.__module__}.Config has no field {key!r}; fields: {', '.join(sorted(fields))}")
+        out[key] = _parse_value(text, hints.get(key))
+    return out
+
+
+def _load_run(run_dir: str):
+    """(checkpoint, algorithm module, policy) of a run folder or a checkpoint file."""
+    from rlcore.algos import get_algorithm
+    from rlcore.checkpoint import load_checkpoint
+    from rlcore.runs import RunDir
+
+    path = Path(run_dir)
+    ckpt = load_checkpoint(RunDir(path).checkpoint if path.is_dir() else path)
+    module = get_algorithm(ckpt["algo"])
+    return ckpt, module, module.load_policy(ckpt)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from rlcore.algos import get_algorithm
+    from rlcore.envs import check_env_id
+
+    module = get_algorithm(args.algo)
+    check_env_id(args.env)
+    overrides = _overrides(module.Config, args.set or [])
+    if args.env_kwargs:
+        overrides["env_kwargs"] = json.loads(args.env_kwargs)
+    config = module.make_config(args.algo, **overrides)
+    try:
+        module.train(args.env, config, steps=args.steps, seed=args.seed, out=args.out,
+                     progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f"\nInterrupted. Checkpoint saved in {args.out}; run the same command again to resume.",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
+    print(f"Done: {args.algo} on {args.env}, {args.steps} steps, seed {args.seed} -> {args.out}")
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from rlcore.envs import make_env
+    from rlcore.evaluate import evaluate_policy, summarize
+
+    ckpt, _, policy = _load_run(args.run)
+    env = make_env(ckpt["env_id"], seed=args.seed, **ckpt["config"].get("env_kwargs", {}))
+    returns = evaluate_policy(policy, env, episodes=args.episodes, seed=args.seed, max_steps=args.max_steps)
+    env.close()
+    result = {"algo": ckpt["algo"], "env_id": ckpt["env_id"], "train_seed": ckpt["seed"],
+              "train_steps": ckpt["step"], "eval_seed": args.seed, **summarize(returns),
+              "returns": [float(r) for r in returns]}
+    print(json.dumps(result))
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from rlcore.render import render_gif
+
+    ckpt, _, policy = _load_run(args.run)
+    data = render_gif(ckpt["env_id"], policy, max_frames=args.frames, seed=args.seed, fps=args.fps,
+                      path=args.out, env_kwargs=ckpt["config"].get("env_kwargs", {}))
+    print(f"Wrote {args.out} ({len(data) / 1e6:.2f} MB, {ckpt['algo']} on {ckpt['env_id']})")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from rlcore.algos import ALGORITHMS
+
+    p = argparse.ArgumentParser(prog="python -m rlcore", description="Train, evaluate and render rlcore agents.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    t = sub.add_parser("train", help="train an agent and write its run folder")
+    t.add_argument("algo", help=f"one of: {', '.join(sorted(ALGORITHMS))}")
+    t.add_argument("--env", required=True, help="Gymnasium environment id, e.g. FrozenLake-v1")
+    t.add_argument("--steps", type=int, required=True, help="environment steps to train for")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--out", required=True, help="run folder (config, progress.csv, checkpoint.pt)")
+    t.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a Config field (repeatable)")
+    t.add_argument("--env-kwargs", help='JSON keyword arguments for gymnasium.make, e.g. \'{"is_slippery": false}\'')
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.set_defaults(func=cmd_train)
+
+    e = sub.add_parser("evaluate", help="evaluate the deterministic policy of a run")
+    e.add_argument("run", help="run folder (or its checkpoint.pt)")
+    e.add_argument("--episodes", type=int, default=10)
+    e.add_argument("--seed", type=int, default=10_000, help="seed of the first evaluation episode")
+    e.add_argument("--max-steps", type=int, default=None, help="cap on steps per episode")
+    e.set_defaults(func=cmd_evaluate)
+
+    r = sub.add_parser("render", help="render the deterministic policy of a run to a GIF")
+    r.add_argument("run", help="run folder (or its checkpoint.pt)")
+    r.add_argument("--out", required=True, help="GIF file to write")
+    r.add_argument("--frames", type=int, default=300)
+    r.add_argument("--fps", type=int, default=30)
+    r.add_argument("--seed", type=int, default=0)
+    r.set_defaults(func=cmd_render)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    from rlcore.algos import UnknownAlgorithmError
+    from rlcore.checkpoint import CheckpointError
+    from rlcore.envs import UnknownEnvironmentError
+    from rlcore.render import HeadlessGLError
+
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,110 @@
+"""The command line, driven the way a user (or another tool) drives it: as a subprocess."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from rlcore.checkpoint import load_checkpoint
+
+
+def rlcore(*args, check=True):
+    proc = subprocess.run([sys.executable, "-m", "rlcore", *map(str, args)], capture_output=True, text=True, timeout=300)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"rlcore {' '.join(map(str, args))} failed ({proc.returncode}):\n{proc.stderr}")
+    return proc
+
+
+@pytest.fixture(scope="module")
+def frozenlake_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "fl"
+    rlcore("train", "q-learning", "--env", "FrozenLake-v1", "--steps", 15000, "--seed", 0, "--out", out,
+           "--env-kwargs", '{"is_slippery": false}', "--no-progress")
+    return out
+
+
+def test_train_writes_the_run_folder(frozenlake_run):
+    for name in ("config.json", "meta.json", "progress.csv", "checkpoint.pt"):
+        assert (frozenlake_run / name).is_file()
+    meta = json.loads((frozenlake_run / "meta.json").read_text())
+    assert "train q-learning" in meta["command"] and meta["versions"]["gymnasium"]
+    config = json.loads((frozenlake_run / "config.json").read_text())
+    assert config["config"]["env_kwargs"] == {"is_slippery": False} and config["seed"] == 0
+
+
+def test_evaluate_prints_json_last(frozenlake_run):
+    out = rlcore("evaluate", frozenlake_run, "--episodes", 4).stdout
+    result = json.loads(out.strip().splitlines()[-1])
+    assert result["episodes"] == 4
+    assert result["mean_return"] == 1.0 and result["std_return"] == 0.0
+    assert result["env_id"] == "FrozenLake-v1"
+
+
+def test_render_writes_a_gif(frozenlake_run, tmp_path):
+    gif = tmp_path / "fl.gif"
+    rlcore("render", frozenlake_run, "--out", gif, "--frames", 8)
+    assert gif.read_bytes()[:6] == b"GIF89a"
+
+
+def test_set_overrides_config_fields(tmp_path):
+    rlcore("train", "sarsa", "--env", "CliffWalking-v1", "--steps", 500, "--out", tmp_path / "c",
+           "--set", "alpha=0.5", "--set", "gamma=1", "--no-progress")
+    config = json.loads((tmp_path / "c" / "config.json").read_text())["config"]
+    assert config["method"] == "sarsa" and config["alpha"] == 0.5 and config["gamma"] == 1.0
+    bad = rlcore("train", "sarsa", "--env", "CliffWalking-v1", "--steps", 5, "--out", tmp_path / "d",
+                 "--set", "alpah=0.5", check=False)
+    assert bad.returncode == 2 and "no field 'alpah'" in bad.stderr
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["train", "q-learning", "--env", "Frozenlake-v1", "--steps", 5], "Did you mean 'FrozenLake-v1'"),
+        (["train", "q-lerning", "--env", "FrozenLake-v1", "--steps", 5], "Did you mean 'q-learning'"),
+        (["train", "q-learning", "--env", "Hopper-v5", "--steps", 5], "discrete states and actions"),
+    ],
+)
+def test_bad_training_input_is_one_clear_line(args, message, tmp_path):
+    proc = rlcore(*args, "--out", tmp_path / "x", check=False)
+    assert proc.returncode == 2
+    assert message in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_corrupt_checkpoint_is_a_clear_error(frozenlake_run, tmp_path):
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    data = (frozenlake_run / "checkpoint.pt").read_bytes()
+    (broken / "checkpoint.pt").write_bytes(data[: len(data) // 3])
+    for cmd in (["evaluate", broken], ["render", broken, "--out", tmp_path / "x.gif"]):
+        proc = rlcore(*cmd, check=False)
+        assert proc.returncode == 2
+        assert "not an rlcore checkpoint" in proc.stderr or "could not be loaded" in proc.stderr
+        assert "Traceback" not in proc.stderr and "pickle" not in proc.stderr.lower().split("error:")[0]
+    proc = rlcore("evaluate", tmp_path / "empty-folder-that-does-not-exist", check=False)
+    assert proc.returncode == 2 and "No checkpoint" in proc.stderr
+
+
+def test_ctrl_c_leaves_a_usable_checkpoint_and_resumes(tmp_path):
+    out = tmp_path / "long"
+    cmd = [sys.executable, "-m", "rlcore", "train", "q-learning", "--env", "Taxi-v4", "--steps", "50000000",
+           "--out", str(out), "--no-progress", "--set", "checkpoint_every=100000000"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and not (out / "progress.csv").exists():
+        time.sleep(0.2)
+    time.sleep(1.0)  # train a little
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Checkpoint saved" in err
+    ckpt = load_checkpoint(out / "checkpoint.pt")
+    assert 0 < ckpt["step"] < 50_000_000 and not ckpt["complete"]
+    result = json.loads(rlcore("evaluate", out, "--episodes", 2, "--max-steps", 50).stdout.splitlines()[-1])
+    assert result["train_steps"] == ckpt["step"]
+    # the same command with a budget already reached finishes at once from the checkpoint
+    rlcore("train", "q-learning", "--env", "Taxi-v4", "--steps", ckpt["step"], "--out", out, "--no-progress")
+    assert load_checkpoint(out / "checkpoint.pt")["step"] == ckpt["step"]

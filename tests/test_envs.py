@@ -1,0 +1,70 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from rlcore.envs import UnknownEnvironmentError, check_env_id, make_env, make_vec_env, space_shape, suggest_env_ids
+
+
+def test_unknown_id_says_so_and_suggests_close_ids():
+    with pytest.raises(UnknownEnvironmentError) as err:
+        make_env("Hoper-v5")
+    msg = str(err.value)
+    assert "Unknown environment id 'Hoper-v5'" in msg
+    assert "'Hopper-v5'" in msg
+
+
+def test_suggestions_ignore_case():
+    assert suggest_env_ids("cartpole-v1")[0] == "CartPole-v1"
+    with pytest.raises(ValueError):  # it is a ValueError, so generic handlers catch it too
+        check_env_id("cartpole-v1")
+
+
+def test_no_suggestion_for_nonsense():
+    with pytest.raises(UnknownEnvironmentError) as err:
+        check_env_id("zzzzzzzzzzzz")
+    assert "Did you mean" not in str(err.value)
+
+
+def test_same_seed_same_trajectory():
+    def trajectory(seed):
+        env = make_env("CartPole-v1", seed=seed)
+        obs, _ = env.reset(seed=seed)
+        out = [obs]
+        for _ in range(8):  # CartPole cannot fall in fewer steps
+            obs, *_ = env.step(env.action_space.sample())
+            out.append(obs)
+        return np.array(out)
+
+    np.testing.assert_array_equal(trajectory(3), trajectory(3))
+    assert not np.array_equal(trajectory(3), trajectory(4))
+
+
+def test_episode_statistics_are_recorded():
+    env = make_env("CartPole-v1", seed=0)
+    env.reset(seed=0)
+    total, done, info = 0.0, False, {}
+    while not done:
+        _, r, term, trunc, info = env.step(env.action_space.sample())
+        total += r
+        done = term or trunc
+    assert info["episode"]["r"] == pytest.approx(total)
+
+
+def test_env_kwargs_reach_gymnasium():
+    env = make_env("FrozenLake-v1", is_slippery=False)
+    env.reset(seed=0)
+    # deterministic: RIGHT from the start state always lands on state 1
+    assert env.step(2)[0] == 1
+
+
+def test_vec_env_seeds_each_copy():
+    envs = make_vec_env("CartPole-v1", num_envs=2, seed=0)
+    obs, _ = envs.reset(seed=0)
+    assert obs.shape == (2, 4)
+    assert not np.array_equal(obs[0], obs[1])
+    envs.close()
+
+
+def test_space_shape():
+    assert space_shape(gym.spaces.Discrete(4)) == (4,)
+    assert space_shape(gym.spaces.Box(-1, 1, (3, 2))) == (3, 2)

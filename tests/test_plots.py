@@ -1,0 +1,44 @@
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np
+import pytest
+
+from rlcore.plots import align_runs, mean_and_band, plot_learning_curves, smooth
+
+
+def test_smooth_is_a_trailing_mean():
+    np.testing.assert_allclose(smooth(np.array([0.0, 2.0, 4.0, 6.0]), 2), [0.0, 1.0, 3.0, 5.0])
+    np.testing.assert_array_equal(smooth(np.array([1.0, 2.0]), 1), [1.0, 2.0])
+
+
+def test_align_runs_uses_the_common_x_range():
+    runs = [(np.array([0, 10]), np.array([0.0, 10.0])), (np.array([0, 5, 20]), np.array([0.0, 5.0, 20.0]))]
+    grid, ys = align_runs(runs, num_points=3)
+    np.testing.assert_allclose(grid, [0, 5, 10])
+    np.testing.assert_allclose(ys, [[0, 5, 10], [0, 5, 10]])
+
+
+def test_bands():
+    ys = np.array([[0.0, 0.0], [2.0, 4.0]])
+    mean, lo, hi = mean_and_band(ys, "minmax")
+    np.testing.assert_allclose(mean, [1, 2])
+    np.testing.assert_allclose(lo, [0, 0])
+    np.testing.assert_allclose(hi, [2, 4])
+    mean, lo, hi = mean_and_band(ys, "ci95")
+    assert np.all(lo <= mean) and np.all(mean <= hi)
+    assert np.all(lo >= 0) and np.all(hi <= [2, 4])
+    with pytest.raises(ValueError):
+        mean_and_band(ys, "bogus")
+
+
+def test_plot_draws_one_line_and_band_per_label():
+    x = np.arange(10)
+    runs = {"a": [(x, x * 1.0), (x, x * 2.0)], "b": [(x, -x * 1.0)]}
+    ax = plot_learning_curves(runs, title="t")
+    assert len(ax.lines) == 2
+    assert len(ax.collections) == 2  # the bands
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == ["a (2 seeds)", "b (1 seed)"]
+    np.testing.assert_allclose(ax.lines[0].get_ydata()[-1], 13.5)  # mean of 9 and 18
