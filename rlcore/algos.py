@@ -19,6 +19,7 @@ from types import ModuleType
 ALGORITHMS: dict[str, str] = {
     "q-learning": "rlcore.tabular",
     "sarsa": "rlcore.tabular",
+    "dqn": "rlcore.dqn",
 }
 
 

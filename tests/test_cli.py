@@ -108,3 +108,15 @@ def test_ctrl_c_leaves_a_usable_checkpoint_and_resumes(tmp_path):
     # the same command with a budget already reached finishes at once from the checkpoint
     rlcore("train", "q-learning", "--env", "Taxi-v4", "--steps", ckpt["step"], "--out", out, "--no-progress")
     assert load_checkpoint(out / "checkpoint.pt")["step"] == ckpt["step"]
+
+
+def test_dqn_through_the_command_line(tmp_path):
+    out = tmp_path / "dqn"
+    rlcore("train", "dqn", "--env", "CartPole-v1", "--steps", 1500, "--out", out, "--no-progress",
+           "--set", "double=true", "--set", "dueling=true", "--set", "hidden=[32]", "--set", "eval_every=500")
+    assert json.loads((out / "config.json").read_text())["config"]["hidden"] == [32]
+    assert (out / "eval.csv").read_text().count("\n") == 4  # header + evaluations at 500, 1000, 1500
+    result = json.loads(rlcore("evaluate", out, "--episodes", 2).stdout.splitlines()[-1])
+    assert result["algo"] == "dqn" and result["episodes"] == 2
+    proc = rlcore("train", "dqn", "--env", "Pendulum-v1", "--steps", 10, "--out", tmp_path / "p", check=False)
+    assert proc.returncode == 2 and "discrete action space" in proc.stderr and "Traceback" not in proc.stderr

@@ -1,0 +1,363 @@
+"""Deep Q-networks (chapters 2 and 3): DQN with Double, Dueling and Prioritized replay as switches.
+
+One implementation, one ``Config``: ``double``, ``dueling`` and ``prioritized`` turn the variants on
+and off, so every comparison in the book changes exactly one thing.
+
+The loop (Mnih et al. 2015, Algorithm 1, with the variants' changes marked):
+
+    for each step:
+        act epsilon-greedily on Q(s, .; theta)
+        store (s, a, r, s', terminated) in the replay memory D
+        every train_freq steps, gradient_steps times:
+            sample a minibatch from D                       (prioritized: proportional to |delta|^alpha)
+            y = r + gamma * Q(s', argmax_a' Q(s', a'; .); theta^-) unless terminated
+                                                            (DQN: argmax with theta^-; Double: with theta)
+            minimize the Huber loss of y - Q(s, a; theta)  (prioritized: weighted by importance weights)
+        every target_update_interval steps: theta^- <- theta   (or softly, with tau < 1)
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm.auto import tqdm
+
+from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
+from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.envs import make_env
+from rlcore.evaluate import evaluate_policy
+from rlcore.logger import CSVLogger
+from rlcore.nets import DuelingQNetwork, QNetwork
+from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_json
+from rlcore.tabular import linear_schedule
+
+
+@dataclass
+class Config:
+    """Hyperparameters of DQN and its variants (defaults: RL-Zoo's tuned CartPole-v1 settings)."""
+
+    double: bool = False
+    """Double DQN: choose the next action with the online network, evaluate it with the target network."""
+    dueling: bool = False
+    """Dueling architecture: Q = V + A - mean(A)."""
+    prioritized: bool = False
+    """Proportional prioritized replay with importance-sampling weights."""
+    hidden: tuple[int, ...] = (256, 256)
+    """Hidden layer sizes of the Q-network."""
+    learning_rate: float = 2.3e-3
+    """Adam step size."""
+    gamma: float = 0.99
+    """Discount factor."""
+    buffer_size: int = 100_000
+    """Replay memory capacity (transitions)."""
+    batch_size: int = 64
+    """Minibatch size."""
+    learning_starts: int = 1_000
+    """Steps of experience collected (with epsilon = start) before the first update."""
+    train_freq: int = 256
+    """Collect this many environment steps between rounds of updates."""
+    gradient_steps: int = 128
+    """Gradient steps per round of updates."""
+    target_update_interval: int = 10
+    """Environment steps between target-network updates."""
+    tau: float = 1.0
+    """Target update rate: 1.0 copies theta (hard update); < 1 is Polyak averaging."""
+    epsilon_start: float = 1.0
+    """Exploration rate at step 0."""
+    epsilon_end: float = 0.04
+    """Exploration rate after the decay."""
+    exploration_fraction: float = 0.16
+    """Fraction of the step budget over which epsilon decays linearly."""
+    huber: bool = True
+    """Huber (smooth L1) loss instead of the squared TD error."""
+    max_grad_norm: float = 10.0
+    """Clip the gradient's global norm to this (0: no clipping)."""
+    per_alpha: float = 0.6
+    """Prioritized replay: how strongly priorities shape sampling (0: uniform)."""
+    per_beta_start: float = 0.4
+    """Prioritized replay: importance-sampling exponent at step 0, annealed to 1 at the end."""
+    eval_every: int = 5_000
+    """Evaluate the greedy policy every this many steps (0: never)."""
+    eval_episodes: int = 5
+    """Episodes per evaluation."""
+    checkpoint_every: int = 10_000
+    """Write checkpoint.pt every this many steps (and at the end, and on Ctrl-C)."""
+    replay_in_checkpoint: bool = True
+    """Save the replay memory in the checkpoint so that a resumed run continues exactly."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments for ``gymnasium.make``."""
+
+    def __post_init__(self) -> None:
+        self.hidden = tuple(int(h) for h in self.hidden)
+        if not 0 < self.tau <= 1:
+            raise ValueError(f"tau must be in (0, 1], got {self.tau}")
+        if self.batch_size < 1 or self.buffer_size < self.batch_size:
+            raise ValueError("need 1 <= batch_size <= buffer_size")
+
+    @property
+    def variant(self) -> str:
+        """A short name: 'DQN', 'Double DQN', 'Dueling Double PER DQN', ..."""
+        parts = [n for n, on in (("Dueling", self.dueling), ("Double", self.double), ("PER", self.prioritized)) if on]
+        return " ".join([*parts, "DQN"])
+
+
+# --- the pieces of the update, one small function each ------------------------------------------
+
+
+def dqn_target(q_target: torch.nn.Module, next_obs: torch.Tensor, rewards: torch.Tensor,
+               terminated: torch.Tensor, gamma: float) -> torch.Tensor:
+    """y = r + gamma * max_a' Q(s', a'; theta^-), and y = r where s' is terminal."""
+    with torch.no_grad():
+        next_q = q_target(next_obs).max(dim=1).values
+    return rewards + gamma * (1.0 - terminated) * next_q
+
+
+def double_dqn_target(q_online: torch.nn.Module, q_target: torch.nn.Module, next_obs: torch.Tensor,
+                      rewards: torch.Tensor, terminated: torch.Tensor, gamma: float) -> torch.Tensor:
+    """y = r + gamma * Q(s', argmax_a' Q(s', a'; theta); theta^-)  (van Hasselt et al. 2016)."""
+    with torch.no_grad():
+        best = q_online(next_obs).argmax(dim=1, keepdim=True)
+        next_q = q_target(next_obs).gather(1, best).squeeze(1)
+    return rewards + gamma * (1.0 - terminated) * next_q
+
+
+def td_loss(q_values: torch.Tensor, targets: torch.Tensor, weights: torch.Tensor | None = None,
+            huber: bool = True) -> torch.Tensor:
+    """Mean (optionally importance-weighted) Huber or squared error between Q(s, a) and y."""
+    per_sample = (F.smooth_l1_loss if huber else F.mse_loss)(q_values, targets, reduction="none")
+    if weights is not None:
+        per_sample = per_sample * weights
+    return per_sample.mean()
+
+
+def soft_update(target: torch.nn.Module, source: torch.nn.Module, tau: float) -> None:
+    """theta' <- tau * theta + (1 - tau) * theta'  (tau = 1 copies)."""
+    with torch.no_grad():
+        for t, s in zip(target.parameters(), source.parameters()):
+            t.lerp_(s, tau)
+
+
+def greedy_action(q: torch.nn.Module, obs: np.ndarray) -> int:
+    """argmax_a Q(s, a) for one observation."""
+    with torch.no_grad():
+        return int(q(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)).argmax(dim=1).item())
+
+
+# --- the agent ----------------------------------------------------------------------------------
+
+
+def check_spaces(env: gym.Env, env_id: str) -> tuple[int, int]:
+    """(observation size, number of actions); a clear error where DQN does not apply."""
+    obs, act = env.observation_space, env.action_space
+    if not isinstance(act, gym.spaces.Discrete):
+        raise ValueError(
+            f"DQN needs a discrete action space, but {env_id} has {act}. "
+            "For continuous actions use ddpg or ppo (e.g. `python -m rlcore train ddpg --env ...`)."
+        )
+    if not isinstance(obs, gym.spaces.Box) or len(obs.shape) != 1:
+        raise ValueError(
+            f"rlcore's DQN takes flat vector observations, but {env_id} has {obs}. "
+            "For Discrete observations use q-learning; wrap images with a feature extractor first."
+        )
+    return int(obs.shape[0]), int(act.n)
+
+
+def make_q_network(config: Config, obs_dim: int, n_actions: int) -> torch.nn.Module:
+    cls = DuelingQNetwork if config.dueling else QNetwork
+    return cls(obs_dim, n_actions, config.hidden)
+
+
+class GreedyPolicy:
+    """The deterministic policy argmax_a Q(s, a), callable on one observation."""
+
+    def __init__(self, q: torch.nn.Module):
+        self.q = q.eval()
+
+    def __call__(self, obs: Any) -> int:
+        return greedy_action(self.q, obs)
+
+
+@dataclass
+class Result:
+    """What :func:`train` returns."""
+
+    q: torch.nn.Module
+    episode_returns: np.ndarray
+    episode_end_steps: np.ndarray
+    eval_steps: np.ndarray
+    eval_returns: np.ndarray
+    steps: int
+
+
+def update(q: torch.nn.Module, q_target: torch.nn.Module, optimizer: torch.optim.Optimizer, batch: Batch,
+           config: Config) -> tuple[float, np.ndarray]:
+    """One gradient step on a minibatch; returns the loss and the TD errors (for priorities)."""
+    obs = torch.as_tensor(batch.obs)
+    actions = torch.as_tensor(batch.actions).long()
+    rewards = torch.as_tensor(batch.rewards)
+    next_obs = torch.as_tensor(batch.next_obs)
+    terminated = torch.as_tensor(batch.terminated)
+    if config.double:
+        y = double_dqn_target(q, q_target, next_obs, rewards, terminated, config.gamma)
+    else:
+        y = dqn_target(q_target, next_obs, rewards, terminated, config.gamma)
+    q_sa = q(obs).gather(1, actions.unsqueeze(1)).squeeze(1)
+    weights = torch.as_tensor(batch.weights) if config.prioritized else None
+    loss = td_loss(q_sa, y, weights, config.huber)
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if config.max_grad_norm > 0:
+        torch.nn.utils.clip_grad_norm_(q.parameters(), config.max_grad_norm)
+    optimizer.step()
+    return float(loss.item()), (y - q_sa).detach().numpy()
+
+
+def train(
+    env_id: str,
+    config: Config | None = None,
+    steps: int = 50_000,
+    seed: int = 0,
+    out: str | Path | None = None,
+    progress: bool = False,
+) -> Result:
+    """Train a DQN variant for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint)."""
+    config = config or Config()
+    torch.manual_seed(seed)
+    env = make_env(env_id, seed=seed, **config.env_kwargs)
+    eval_env = make_env(env_id, seed=seed + 10_000, **config.env_kwargs)
+    obs_dim, n_actions = check_spaces(env, env_id)
+    q = make_q_network(config, obs_dim, n_actions)
+    q_target = copy.deepcopy(q)
+    optimizer = torch.optim.Adam(q.parameters(), lr=config.learning_rate)
+    buffer_cls = PrioritizedReplayBuffer if config.prioritized else ReplayBuffer
+    kwargs = {"alpha": config.per_alpha} if config.prioritized else {}
+    buffer = buffer_cls(config.buffer_size, (obs_dim,), seed=seed, **kwargs)
+    rng = np.random.default_rng(seed)
+    step = episode = 0
+    returns: list[float] = []
+    end_steps: list[int] = []
+    eval_steps: list[int] = []
+    eval_returns: list[float] = []
+
+    run = RunDir(out) if out is not None else None
+    log = eval_log = None
+    if run is not None:
+        if run.checkpoint.exists():
+            ckpt = load_checkpoint(run.checkpoint)
+            if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != ("dqn", env_id, seed):
+                raise ValueError(f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} "
+                                 f"(seed {ckpt.get('seed')}); choose another --out folder or delete it.")
+            q.load_state_dict(ckpt["q"])
+            q_target.load_state_dict(ckpt["q_target"])
+            optimizer.load_state_dict(ckpt["optimizer"])
+            if "replay" in ckpt:
+                buffer.load_state_dict({k: (v.numpy() if isinstance(v, torch.Tensor) else v)
+                                        for k, v in ckpt["replay"].items()})
+            step, episode = int(ckpt["step"]), int(ckpt["episode"])
+            rng.bit_generator.state = ckpt["rng"]
+            torch.set_rng_state(ckpt["torch_rng"])
+        else:
+            write_json(run.config, {"algo": "dqn", "env_id": env_id, "seed": seed, "steps": steps,
+                                    "config": config_dict(config)})
+            write_json(run.meta, run_metadata(algo="dqn", variant=config.variant, env_id=env_id, seed=seed, steps=steps))
+        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "epsilon"])
+        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
+
+    def checkpoint() -> None:
+        if run is None:
+            return
+        state = {"algo": "dqn", "env_id": env_id, "seed": seed, "config": config_dict(config),
+                 "step": step, "episode": episode, "total_steps": steps, "complete": step >= steps,
+                 "q": q.state_dict(), "q_target": q_target.state_dict(), "optimizer": optimizer.state_dict(),
+                 "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
+        if config.replay_in_checkpoint:
+            state["replay"] = buffer.state_dict()
+        save_checkpoint(run.checkpoint, state)
+
+    decay_steps = int(config.exploration_fraction * steps)
+    obs, _ = env.reset(seed=episode_seed(seed, episode))
+    ep_return, ep_len = 0.0, 0
+    bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step", desc=f"{config.variant} {env_id}")
+    try:
+        while step < steps:
+            epsilon = linear_schedule(config.epsilon_start, config.epsilon_end, decay_steps, step)
+            if step < config.learning_starts or rng.random() < epsilon:
+                action = int(rng.integers(n_actions))
+            else:
+                action = greedy_action(q, obs)
+            next_obs, reward, terminated, truncated, _ = env.step(action)
+            buffer.add(obs, action, reward, next_obs, terminated)
+            obs = next_obs
+            step += 1
+            ep_return += float(reward)
+            ep_len += 1
+            if terminated or truncated:
+                episode += 1
+                returns.append(ep_return)
+                end_steps.append(step)
+                if log is not None:
+                    log.log(episode=episode, step=step, episode_return=ep_return, episode_length=ep_len, epsilon=epsilon)
+                bar.set_postfix(ret=f"{ep_return:.1f}", eps=f"{epsilon:.2f}", refresh=False)
+                obs, _ = env.reset(seed=episode_seed(seed, episode))
+                ep_return, ep_len = 0.0, 0
+
+            if step >= config.learning_starts and step % config.train_freq == 0:
+                beta = config.per_beta_start + (1.0 - config.per_beta_start) * min(step / steps, 1.0)
+                for _ in range(config.gradient_steps):
+                    batch = buffer.sample(config.batch_size, beta) if config.prioritized else buffer.sample(config.batch_size)
+                    _, td_errors = update(q, q_target, optimizer, batch, config)
+                    if config.prioritized:
+                        buffer.update_priorities(batch.indices, td_errors)
+            if step % config.target_update_interval == 0:
+                soft_update(q_target, q, config.tau)
+            if config.eval_every and step % config.eval_every == 0:
+                r = evaluate_policy(GreedyPolicy(q), eval_env, config.eval_episodes, seed=seed + 10_000)
+                q.train()
+                eval_steps.append(step)
+                eval_returns.append(float(r.mean()))
+                if eval_log is not None:
+                    eval_log.log(step=step, mean_return=float(r.mean()), std_return=float(r.std()), episodes=len(r))
+            if step % config.checkpoint_every == 0:
+                checkpoint()
+            bar.update(1)
+    except KeyboardInterrupt:
+        checkpoint()
+        raise
+    finally:
+        bar.close()
+        env.close()
+        eval_env.close()
+        for f in (log, eval_log):
+            if f is not None:
+                f.close()
+    checkpoint()
+    return Result(q, np.array(returns), np.array(end_steps, dtype=int), np.array(eval_steps, dtype=int),
+                  np.array(eval_returns), step)
+
+
+# --- what the command line needs ----------------------------------------------------------------
+
+
+def make_config(algo: str, **overrides: Any) -> Config:
+    """The Config for ``python -m rlcore train dqn``; ``--set double=true`` etc. pick a variant."""
+    return Config(**overrides)
+
+
+def load_policy(ckpt: dict[str, Any]) -> GreedyPolicy:
+    """The greedy policy of a DQN checkpoint."""
+    config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
+    state = ckpt["q"]
+    first = next(k for k in state if k.endswith("weight"))
+    obs_dim = state[first].shape[1]
+    last = [k for k in state if k.endswith("weight")][-1]
+    n_actions = state[last].shape[0]
+    q = make_q_network(config, obs_dim, n_actions)
+    q.load_state_dict(state)
+    return GreedyPolicy(q)
