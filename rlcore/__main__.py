@@ -3,6 +3,7 @@
     python -m rlcore train q-learning --env FrozenLake-v1 --steps 20000 --seed 0 --out runs/fl
     python -m rlcore evaluate runs/fl --episodes 10      # last line: one JSON object
     python -m rlcore render runs/fl --out fl.gif
+    python -m rlcore experiments run dqn-cartpole --jobs 2   # the book's full-budget runs, resumable
 
 ``train`` shows a progress bar; Ctrl-C saves a checkpoint, and running the same command again resumes.
 Errors a user can fix (an unknown environment or algorithm, a corrupt checkpoint, no headless GL)
@@ -107,6 +108,32 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_experiments(args: argparse.Namespace) -> int:
+    from rlcore import experiments as ex
+
+    if args.action == "list":
+        for name in sorted(ex.EXPERIMENTS):
+            exp = ex.get_experiment(name)
+            runs = sum(len(r.seeds) for r in exp.runs)
+            print(f"{name}: {exp.description} ({len(exp.runs)} configurations, {runs} runs)")
+        return 0
+    if not args.name:
+        raise ValueError(f"experiments {args.action} needs an experiment name; see `python -m rlcore experiments list`")
+    results = Path(args.results)
+    if args.action == "run":
+        seeds = [int(s) for s in args.seeds.split(",")] if args.seeds else None
+        try:
+            lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=seeds,
+                                      results=results, work=Path(args.work))
+        except KeyboardInterrupt:
+            print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
+                  "when you run the same command again.", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        print("\n".join(lines))
+    print("\n".join(ex.status_lines(args.name, results)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from rlcore.algos import ALGORITHMS
 
@@ -138,6 +165,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fps", type=int, default=30)
     r.add_argument("--seed", type=int, default=0)
     r.set_defaults(func=cmd_render)
+
+    from rlcore.experiments import RESULTS_DIR, WORK_DIR
+
+    x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
+    x.add_argument("action", choices=["list", "run", "status"])
+    x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
+    x.add_argument("--jobs", type=int, default=1, help="runs in parallel, one process each (one per core)")
+    x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
+    x.add_argument("--seeds", help="comma-separated subset of the seeds, e.g. 0,1")
+    x.add_argument("--results", default=str(RESULTS_DIR), help="where finished runs' small outputs go")
+    x.add_argument("--work", default=str(WORK_DIR), help="where runs train and keep full checkpoints")
+    x.set_defaults(func=cmd_experiments)
     return p
 
 

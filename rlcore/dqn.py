@@ -39,6 +39,10 @@ from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_j
 from rlcore.tabular import linear_schedule
 
 
+POLICY_KEYS = ("q",)
+"""Checkpoint keys :func:`load_policy` needs (what ``results/`` keeps of a finished run)."""
+
+
 @dataclass
 class Config:
     """Hyperparameters of DQN and its variants (defaults: RL-Zoo's tuned CartPole-v1 settings)."""
@@ -69,6 +73,8 @@ class Config:
     """Environment steps between target-network updates."""
     tau: float = 1.0
     """Target update rate: 1.0 copies theta (hard update); < 1 is Polyak averaging."""
+    target_network: bool = True
+    """Compute targets with a separate, periodically updated network theta^- (False: with theta itself)."""
     epsilon_start: float = 1.0
     """Exploration rate at step 0."""
     epsilon_end: float = 0.04
@@ -199,6 +205,8 @@ class Result:
 def update(q: torch.nn.Module, q_target: torch.nn.Module, optimizer: torch.optim.Optimizer, batch: Batch,
            config: Config) -> tuple[float, np.ndarray]:
     """One gradient step on a minibatch; returns the loss and the TD errors (for priorities)."""
+    if not config.target_network:
+        q_target = q  # the ablation: targets move with every gradient step
     obs = torch.as_tensor(batch.obs)
     actions = torch.as_tensor(batch.actions).long()
     rewards = torch.as_tensor(batch.rewards)

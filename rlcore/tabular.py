@@ -26,6 +26,8 @@ from rlcore.logger import CSVLogger
 from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_json
 
 METHODS = ("q-learning", "sarsa")
+POLICY_KEYS = ("q",)
+"""Checkpoint keys :func:`load_policy` needs."""
 
 
 @dataclass

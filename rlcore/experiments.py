@@ -1,0 +1,199 @@
+"""Full-budget experiments: the named, resumable runs whose outputs the book shows.
+
+    python -m rlcore experiments list
+    python -m rlcore experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
+    python -m rlcore experiments status dqn-cartpole
+
+Each run trains in a work folder (``runs/<experiment>/<run>/seed-<s>/``, not committed: it holds
+full checkpoints with replay memories) and, when it finishes, its small outputs are copied to
+``results/<experiment>/<run>/seed-<s>/``:
+
+    config.json  meta.json     what ran: algorithm, environment, Config, seed, steps; command, versions, commit
+    progress.csv eval.csv      per-episode training returns; periodic evaluations of the deterministic policy
+    policy.pt                  the final policy's weights only (loads with weights_only=True)
+
+Chapters read ``results/`` with :func:`load_experiment`; a run that is missing there is reported so
+that the chapter can say so and fall back to a short live run.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rlcore.logger import read_csv
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+RESULTS_DIR = REPO_ROOT / "results"
+WORK_DIR = REPO_ROOT / "runs"
+# keys every checkpoint carries that say what it is; algorithm modules add their POLICY_KEYS
+_META_KEYS = ("algo", "env_id", "seed", "config", "step", "episode", "total_steps", "complete")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One configuration of an experiment, trained once per seed."""
+
+    name: str
+    """Folder name and legend label, e.g. ``"double-dqn"``."""
+    algo: str
+    """Algorithm name as the command line knows it (``dqn``, ``ddpg``, ...)."""
+    env_id: str
+    steps: int
+    seeds: tuple[int, ...]
+    overrides: dict[str, Any] = field(default_factory=dict)
+    """Config fields that differ from the algorithm's defaults."""
+    label: str | None = None
+    """A longer legend label (default: ``name``)."""
+
+
+@dataclass(frozen=True)
+class Experiment:
+    name: str
+    description: str
+    runs: tuple[RunSpec, ...]
+
+
+def _dqn_cartpole() -> Experiment:
+    seeds = (0, 1, 2, 3, 4)
+    variants = {
+        "dqn": ({}, "DQN"),
+        "double-dqn": ({"double": True}, "Double DQN"),
+        "dueling-dqn": ({"dueling": True}, "Dueling DQN"),
+        "per-dqn": ({"prioritized": True}, "Prioritized DQN"),
+        "no-replay": ({"buffer_size": 64}, "DQN, replay memory of only the last 64 steps"),
+        "no-target": ({"target_network": False}, "DQN without a target network"),
+    }
+    return Experiment(
+        "dqn-cartpole",
+        "DQN and its variants on CartPole-v1, 50k steps, RL-Zoo's tuned hyperparameters, 5 seeds",
+        tuple(RunSpec(n, "dqn", "CartPole-v1", 50_000, seeds, o, label) for n, (o, label) in variants.items()),
+    )
+
+
+EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
+    "dqn-cartpole": _dqn_cartpole,
+}
+
+
+def get_experiment(name: str) -> Experiment:
+    if name not in EXPERIMENTS:
+        raise ValueError(f"Unknown experiment {name!r}. Known: {', '.join(sorted(EXPERIMENTS))}.")
+    return EXPERIMENTS[name]()
+
+
+def run_paths(exp: str, run: str, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> tuple[Path, Path]:
+    """(work folder, results folder) of one seed of one run."""
+    rel = Path(exp) / run / f"seed-{seed}"
+    return Path(work) / rel, Path(results) / rel
+
+
+def export_policy(checkpoint: str | os.PathLike, dest: str | os.PathLike) -> None:
+    """Write only what :func:`load_policy` needs from ``checkpoint`` (no replay memory, no optimizer)."""
+    from rlcore.algos import get_algorithm
+    from rlcore.checkpoint import load_checkpoint, save_checkpoint
+
+    ckpt = load_checkpoint(checkpoint)
+    keys = (*_META_KEYS, *get_algorithm(ckpt["algo"]).POLICY_KEYS)
+    save_checkpoint(dest, {k: ckpt[k] for k in keys if k in ckpt and k not in ("format", "format_version")})
+
+
+def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:
+    """Train (or resume) one seed and copy its small outputs to ``results``; returns a status line."""
+    import torch
+
+    from rlcore.algos import get_algorithm
+
+    torch.set_num_threads(1)
+    work_dir, result_dir = run_paths(exp, spec.name, seed, results, work)
+    if (result_dir / "policy.pt").exists():
+        return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
+    module = get_algorithm(spec.algo)
+    config = module.make_config(spec.algo, **spec.overrides)
+    module.train(spec.env_id, config, steps=spec.steps, seed=seed, out=work_dir, progress=False)
+    result_dir.mkdir(parents=True, exist_ok=True)
+    for name in ("config.json", "meta.json", "progress.csv", "eval.csv"):
+        if (work_dir / name).exists():
+            shutil.copy2(work_dir / name, result_dir / name)
+    export_policy(work_dir / "checkpoint.pt", result_dir / "policy.pt")
+    return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
+
+
+def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
+                   results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
+    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time."""
+    from tqdm.auto import tqdm
+
+    exp = get_experiment(name)
+    tasks = [(spec, s) for spec in exp.runs if not only or spec.name in only
+             for s in spec.seeds if seeds is None or s in seeds]
+    lines: list[str] = []
+    with tqdm(total=len(tasks), desc=name, unit="run") as bar:
+        if jobs <= 1:
+            for spec, s in tasks:
+                lines.append(train_one(name, spec, s, results, work))
+                bar.update(1)
+        else:
+            with ProcessPoolExecutor(max_workers=jobs) as pool:
+                futures = [pool.submit(train_one, name, spec, s, results, work) for spec, s in tasks]
+                for fut in as_completed(futures):
+                    lines.append(fut.result())
+                    bar.update(1)
+    return lines
+
+
+@dataclass
+class SeedResult:
+    seed: int
+    folder: Path
+    progress: dict[str, np.ndarray]
+    evals: dict[str, np.ndarray]
+    config: dict[str, Any]
+    meta: dict[str, Any]
+
+
+@dataclass
+class RunResults:
+    spec: RunSpec
+    seeds: list[SeedResult]
+    missing: list[int]
+
+    @property
+    def label(self) -> str:
+        return self.spec.label or self.spec.name
+
+
+def load_experiment(name: str, results: Path = RESULTS_DIR) -> dict[str, RunResults]:
+    """Everything ``results/`` holds for an experiment, with the seeds still missing listed per run."""
+    out: dict[str, RunResults] = {}
+    for spec in get_experiment(name).runs:
+        found, missing = [], []
+        for s in spec.seeds:
+            _, folder = run_paths(name, spec.name, s, results)
+            if not (folder / "policy.pt").exists():
+                missing.append(s)
+                continue
+            found.append(SeedResult(
+                s, folder, read_csv(folder / "progress.csv"),
+                read_csv(folder / "eval.csv") if (folder / "eval.csv").exists() else {},
+                json.loads((folder / "config.json").read_text()), json.loads((folder / "meta.json").read_text()),
+            ))
+        out[spec.name] = RunResults(spec, found, missing)
+    return out
+
+
+def status_lines(name: str, results: Path = RESULTS_DIR) -> list[str]:
+    lines = []
+    for run, res in load_experiment(name, results).items():
+        have = len(res.seeds)
+        total = have + len(res.missing)
+        lines.append(f"{name}/{run}: {have}/{total} seeds" + (f" (missing {res.missing})" if res.missing else ""))
+    return lines

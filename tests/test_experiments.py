@@ -1,0 +1,46 @@
+import json
+
+import pytest
+
+from rlcore import experiments as ex
+from rlcore.checkpoint import load_checkpoint
+from rlcore.evaluate import evaluate_policy
+from rlcore.envs import make_env
+
+
+@pytest.fixture
+def tiny(monkeypatch):
+    exp = ex.Experiment("tiny", "a test experiment", (
+        ex.RunSpec("ql", "q-learning", "FrozenLake-v1", 3_000, (0, 1), {"env_kwargs": {"is_slippery": False}}),
+        ex.RunSpec("dqn", "dqn", "CartPole-v1", 600, (0,), {"learning_starts": 100, "train_freq": 4,
+                                                            "gradient_steps": 1, "eval_every": 300, "hidden": [16]}),
+    ))
+    monkeypatch.setitem(ex.EXPERIMENTS, "tiny", lambda: exp)
+    return exp
+
+
+def test_run_writes_small_results_and_is_resumable(tiny, tmp_path):
+    results, work = tmp_path / "results", tmp_path / "runs"
+    assert ex.status_lines("tiny", results) == ["tiny/ql: 0/2 seeds (missing [0, 1])", "tiny/dqn: 0/1 seeds (missing [0])"]
+    ex.run_experiment("tiny", only=["ql"], seeds=[0], results=results, work=work)
+    loaded = ex.load_experiment("tiny", results)
+    assert [s.seed for s in loaded["ql"].seeds] == [0] and loaded["ql"].missing == [1]
+    lines = ex.run_experiment("tiny", jobs=2, results=results, work=work)
+    assert any("already in" in line for line in lines)  # seed 0 is not trained twice
+    loaded = ex.load_experiment("tiny", results)
+    assert all(not r.missing for r in loaded.values())
+    folder = results / "tiny" / "dqn" / "seed-0"
+    assert sorted(p.name for p in folder.iterdir()) == ["config.json", "eval.csv", "meta.json", "policy.pt", "progress.csv"]
+    policy = load_checkpoint(folder / "policy.pt")
+    assert "replay" not in policy and "optimizer" not in policy and policy["step"] == 600
+    assert json.loads((folder / "meta.json").read_text())["versions"]["torch"]
+    # the exported policy is what evaluate/render load
+    from rlcore.dqn import load_policy
+
+    evaluate_policy(load_policy(policy), make_env("CartPole-v1"), episodes=1)
+    assert loaded["dqn"].seeds[0].evals["step"].tolist() == [300, 600]
+
+
+def test_unknown_experiment():
+    with pytest.raises(ValueError, match="Unknown experiment"):
+        ex.get_experiment("nope")
