@@ -32,7 +32,7 @@ from tqdm.auto import tqdm
 from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
 from rlcore.checkpoint import load_checkpoint, save_checkpoint
 from rlcore.envs import make_env
-from rlcore.evaluate import evaluate_policy
+from rlcore.evaluate import discounted_return, episode_rewards
 from rlcore.logger import CSVLogger
 from rlcore.nets import DuelingQNetwork, QNetwork
 from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_json
@@ -159,6 +159,24 @@ def greedy_action(q: torch.nn.Module, obs: np.ndarray) -> int:
 # --- the agent ----------------------------------------------------------------------------------
 
 
+def evaluate_q(q: torch.nn.Module, env: gym.Env, episodes: int, seed: int, gamma: float) -> dict[str, float]:
+    """Evaluate the greedy policy, and compare what Q predicts with what it actually gets.
+
+    Returns the mean and std of the undiscounted episode return, the mean estimate
+    ``max_a Q(s_0, a)`` at the start states, and the mean discounted return actually obtained from
+    them. An estimate far above the obtained return is overestimation (chapter 3).
+    """
+    policy = GreedyPolicy(q)
+    rewards = episode_rewards(policy, env, episodes, seed)
+    starts = np.stack([env.reset(seed=seed + i)[0] for i in range(episodes)])
+    with torch.no_grad():
+        q_start = q(torch.as_tensor(starts, dtype=torch.float32)).max(dim=1).values.mean().item()
+    q.train()
+    returns = np.array([r.sum() for r in rewards])
+    return {"mean_return": float(returns.mean()), "std_return": float(returns.std()), "episodes": episodes,
+            "q_start": q_start, "discounted_return_start": float(np.mean([discounted_return(r, gamma) for r in rewards]))}
+
+
 def check_spaces(env: gym.Env, env_id: str) -> tuple[int, int]:
     """(observation size, number of actions); a clear error where DQN does not apply."""
     obs, act = env.observation_space, env.action_space
@@ -199,6 +217,8 @@ class Result:
     episode_end_steps: np.ndarray
     eval_steps: np.ndarray
     eval_returns: np.ndarray
+    eval_q_start: np.ndarray
+    eval_discounted_return_start: np.ndarray
     steps: int
 
 
@@ -243,7 +263,8 @@ def train(
     obs_dim, n_actions = check_spaces(env, env_id)
     q = make_q_network(config, obs_dim, n_actions)
     q_target = copy.deepcopy(q)
-    optimizer = torch.optim.Adam(q.parameters(), lr=config.learning_rate)
+    # fused: one kernel for the whole Adam step instead of a handful per parameter tensor
+    optimizer = torch.optim.Adam(q.parameters(), lr=config.learning_rate, fused=True)
     buffer_cls = PrioritizedReplayBuffer if config.prioritized else ReplayBuffer
     kwargs = {"alpha": config.per_alpha} if config.prioritized else {}
     buffer = buffer_cls(config.buffer_size, (obs_dim,), seed=seed, **kwargs)
@@ -251,8 +272,7 @@ def train(
     step = episode = 0
     returns: list[float] = []
     end_steps: list[int] = []
-    eval_steps: list[int] = []
-    eval_returns: list[float] = []
+    evals: list[dict[str, float]] = []
 
     run = RunDir(out) if out is not None else None
     log = eval_log = None
@@ -276,7 +296,8 @@ def train(
                                     "config": config_dict(config)})
             write_json(run.meta, run_metadata(algo="dqn", variant=config.variant, env_id=env_id, seed=seed, steps=steps))
         log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "epsilon"])
-        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
+        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes", "q_start",
+                                                     "discounted_return_start"])
 
     def checkpoint() -> None:
         if run is None:
@@ -326,12 +347,9 @@ def train(
             if step % config.target_update_interval == 0:
                 soft_update(q_target, q, config.tau)
             if config.eval_every and step % config.eval_every == 0:
-                r = evaluate_policy(GreedyPolicy(q), eval_env, config.eval_episodes, seed=seed + 10_000)
-                q.train()
-                eval_steps.append(step)
-                eval_returns.append(float(r.mean()))
+                evals.append({"step": step, **evaluate_q(q, eval_env, config.eval_episodes, seed + 10_000, config.gamma)})
                 if eval_log is not None:
-                    eval_log.log(step=step, mean_return=float(r.mean()), std_return=float(r.std()), episodes=len(r))
+                    eval_log.log(**evals[-1])
             if step % config.checkpoint_every == 0:
                 checkpoint()
             bar.update(1)
@@ -346,8 +364,9 @@ def train(
             if f is not None:
                 f.close()
     checkpoint()
-    return Result(q, np.array(returns), np.array(end_steps, dtype=int), np.array(eval_steps, dtype=int),
-                  np.array(eval_returns), step)
+    col = lambda k: np.array([e[k] for e in evals])  # noqa: E731
+    return Result(q, np.array(returns), np.array(end_steps, dtype=int), col("step").astype(int), col("mean_return"),
+                  col("q_start"), col("discounted_return_start"), step)
 
 
 # --- what the command line needs ----------------------------------------------------------------

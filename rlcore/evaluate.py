@@ -13,6 +13,33 @@ import gymnasium as gym
 import numpy as np
 
 
+def episode_rewards(
+    policy: Callable[[Any], Any],
+    env: gym.Env,
+    episodes: int = 10,
+    seed: int = 0,
+    max_steps: int | None = None,
+) -> list[np.ndarray]:
+    """Run ``episodes`` episodes of ``policy``; return each episode's sequence of rewards.
+
+    Episode ``i`` starts from ``env.reset(seed=seed + i)``, so two evaluations with the same seed see
+    the same start states. ``max_steps`` caps an episode for environments without a time limit.
+    """
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    out = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed + i)
+        rewards: list[float] = []
+        done = False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(policy(obs))
+            rewards.append(float(reward))
+            done = terminated or truncated or (max_steps is not None and len(rewards) >= max_steps)
+        out.append(np.array(rewards))
+    return out
+
+
 def evaluate_policy(
     policy: Callable[[Any], Any],
     env: gym.Env,
@@ -20,24 +47,14 @@ def evaluate_policy(
     seed: int = 0,
     max_steps: int | None = None,
 ) -> np.ndarray:
-    """Run ``episodes`` episodes of ``policy`` and return their undiscounted returns.
+    """The undiscounted return of each of ``episodes`` episodes of ``policy`` (see :func:`episode_rewards`)."""
+    return np.array([r.sum() for r in episode_rewards(policy, env, episodes, seed, max_steps)])
 
-    Episode ``i`` starts from ``env.reset(seed=seed + i)``, so two evaluations with the same seed see
-    the same start states. ``max_steps`` caps an episode for environments without a time limit.
-    """
-    if episodes < 1:
-        raise ValueError(f"episodes must be >= 1, got {episodes}")
-    returns = np.empty(episodes)
-    for i in range(episodes):
-        obs, _ = env.reset(seed=seed + i)
-        total, steps, done = 0.0, 0, False
-        while not done:
-            obs, reward, terminated, truncated, _ = env.step(policy(obs))
-            total += float(reward)
-            steps += 1
-            done = terminated or truncated or (max_steps is not None and steps >= max_steps)
-        returns[i] = total
-    return returns
+
+def discounted_return(rewards: np.ndarray, gamma: float) -> float:
+    """G_0 = sum_t gamma^t r_t."""
+    rewards = np.asarray(rewards, dtype=float)
+    return float(np.sum(rewards * gamma ** np.arange(len(rewards))))
 
 
 def iqm(values: np.ndarray) -> float:

@@ -79,8 +79,23 @@ def _dqn_cartpole() -> Experiment:
     )
 
 
+def _dqn_lunarlander() -> Experiment:
+    # RL-Zoo's tuned LunarLander-v3 settings (100k steps, one gradient step per 4 env steps... x4)
+    zoo = {"learning_rate": 6.3e-4, "batch_size": 128, "buffer_size": 50_000, "learning_starts": 0,
+           "gamma": 0.99, "target_update_interval": 250, "train_freq": 4, "gradient_steps": 4,
+           "exploration_fraction": 0.12, "epsilon_end": 0.1, "hidden": (256, 256), "eval_every": 10_000}
+    seeds = (0, 1, 2)
+    return Experiment(
+        "dqn-lunarlander",
+        "DQN and Double DQN on LunarLander-v3, 100k steps, RL-Zoo's tuned hyperparameters, 3 seeds",
+        (RunSpec("dqn", "dqn", "LunarLander-v3", 100_000, seeds, zoo, "DQN"),
+         RunSpec("double-dqn", "dqn", "LunarLander-v3", 100_000, seeds, {**zoo, "double": True}, "Double DQN")),
+    )
+
+
 EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "dqn-cartpole": _dqn_cartpole,
+    "dqn-lunarlander": _dqn_lunarlander,
 }
 
 

@@ -102,6 +102,20 @@ def test_continuous_actions_are_a_clear_error():
         check_spaces(make_env("FrozenLake-v1"), "FrozenLake-v1")
 
 
+def test_evaluate_q_compares_estimate_with_obtained_return():
+    from rlcore.dqn import evaluate_q
+
+    class Const(torch.nn.Module):  # predicts 50 for every action
+        def forward(self, obs):
+            return torch.full((obs.shape[0], 2), 50.0)
+
+    stats = evaluate_q(Const(), make_env("CartPole-v1"), episodes=2, seed=0, gamma=0.9)
+    assert stats["q_start"] == 50.0
+    # the greedy action is always 0 (ties -> first), CartPole falls in ~10 steps: G_0 = (1 - 0.9^T) / 0.1 < 10
+    assert 5 < stats["discounted_return_start"] < 10
+    assert stats["episodes"] == 2 and stats["mean_return"] >= 8
+
+
 def test_variant_names():
     assert Config().variant == "DQN"
     assert Config(double=True, dueling=True, prioritized=True).variant == "Dueling Double PER DQN"

@@ -53,3 +53,18 @@ def test_bad_arguments():
         evaluate_policy(lambda o: 0, make_env("CartPole-v1"), episodes=0)
     with pytest.raises(ValueError):
         iqm(np.array([]))
+
+
+def test_discounted_return_by_hand():
+    from rlcore.evaluate import discounted_return
+
+    assert discounted_return(np.array([1.0, 1.0, 1.0]), 0.5) == pytest.approx(1.75)
+    assert discounted_return(np.array([]), 0.9) == 0.0
+
+
+def test_episode_rewards_sum_to_the_returns():
+    from rlcore.evaluate import episode_rewards
+
+    env = make_env("CartPole-v1")
+    rewards = episode_rewards(lambda o: 1, env, episodes=3, seed=2)
+    np.testing.assert_array_equal([r.sum() for r in rewards], evaluate_policy(lambda o: 1, env, 3, seed=2))
