@@ -212,3 +212,45 @@ def status_lines(name: str, results: Path = RESULTS_DIR) -> list[str]:
         total = have + len(res.missing)
         lines.append(f"{name}/{run}: {have}/{total} seeds" + (f" (missing {res.missing})" if res.missing else ""))
     return lines
+
+
+def first_step_reaching(evals: dict[str, np.ndarray], threshold: float) -> int | None:
+    """The first evaluation step whose mean return is >= ``threshold`` (None if never)."""
+    if not evals or len(evals.get("step", [])) == 0:
+        return None
+    hits = np.flatnonzero(np.asarray(evals["mean_return"]) >= threshold)
+    return int(evals["step"][hits[0]]) if len(hits) else None
+
+
+def seeds_table(run: RunResults, threshold: float) -> list[dict[str, Any]]:
+    """Per seed: final evaluation mean return, first step reaching ``threshold``, episodes per evaluation."""
+    rows = []
+    for s in run.seeds:
+        ev = s.evals
+        rows.append({
+            "seed": s.seed,
+            "final_step": int(ev["step"][-1]) if ev else None,
+            "final_mean_return": float(ev["mean_return"][-1]) if ev else None,
+            "eval_episodes": int(ev["episodes"][-1]) if ev else None,
+            "first_step_reaching": first_step_reaching(ev, threshold),
+        })
+    return rows
+
+
+def markdown_table(rows: list[dict[str, Any]], headers: dict[str, str] | None = None) -> str:
+    """A list of dicts as a Markdown table (``headers`` renames columns; None cells show as —)."""
+    if not rows:
+        return "_(no rows)_"
+    keys = list(headers or rows[0])
+    names = [(headers or {}).get(k, k) for k in keys]
+
+    def cell(v: Any) -> str:
+        if v is None:
+            return "—"
+        if isinstance(v, float):
+            return f"{v:,.1f}"
+        return str(v)
+
+    lines = ["| " + " | ".join(names) + " |", "|" + "|".join("---" for _ in keys) + "|"]
+    lines += ["| " + " | ".join(cell(r.get(k)) for k in keys) + " |" for r in rows]
+    return "\n".join(lines)

@@ -44,3 +44,19 @@ def test_run_writes_small_results_and_is_resumable(tiny, tmp_path):
 def test_unknown_experiment():
     with pytest.raises(ValueError, match="Unknown experiment"):
         ex.get_experiment("nope")
+
+
+def test_first_step_reaching_and_tables():
+    import numpy as np
+
+    evals = {"step": np.array([10, 20, 30]), "mean_return": np.array([100.0, 480.0, 400.0]), "episodes": np.array([5, 5, 5])}
+    assert ex.first_step_reaching(evals, 475) == 20
+    assert ex.first_step_reaching(evals, 500) is None
+    assert ex.first_step_reaching({}, 1) is None
+    spec = ex.RunSpec("dqn", "dqn", "CartPole-v1", 30, (0,))
+    run = ex.RunResults(spec, [ex.SeedResult(0, None, {}, evals, {}, {})], [])
+    rows = ex.seeds_table(run, 475)
+    assert rows == [{"seed": 0, "final_step": 30, "final_mean_return": 400.0, "eval_episodes": 5, "first_step_reaching": 20}]
+    md = ex.markdown_table(rows, {"seed": "seed", "first_step_reaching": "first step ≥ 475"})
+    assert md.splitlines() == ["| seed | first step ≥ 475 |", "|---|---|", "| 0 | 20 |"]
+    assert "—" in ex.markdown_table([{"a": None}])
