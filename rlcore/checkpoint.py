@@ -28,12 +28,12 @@ class CheckpointError(RuntimeError):
 
 def _plain(obj: Any, where: str = "payload") -> Any:
     """Return ``obj`` with NumPy arrays turned into tensors; reject what ``weights_only`` can't load."""
+    if isinstance(obj, np.generic):  # before the primitives: np.float64 is a subclass of float
+        return obj.item()
     if isinstance(obj, torch.Tensor) or isinstance(obj, _PRIMITIVES):
         return obj
     if isinstance(obj, np.ndarray):
         return torch.from_numpy(np.ascontiguousarray(obj))
-    if isinstance(obj, np.generic):
-        return obj.item()
     if isinstance(obj, dict):
         return {k: _plain(v, f"{where}[{k!r}]") for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -81,7 +81,9 @@ def load_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
     try:
         data = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises pickle/zip/runtime errors of many kinds
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        # torch's refusal explains itself on its "Unsupported global" line; otherwise the first line
+        first = next((ln for ln in lines if "GLOBAL" in ln), lines[0] if lines else type(exc).__name__)
         raise CheckpointError(
             f"{path} could not be loaded safely as an rlcore checkpoint ({type(exc).__name__}: {first}). "
             "It may be truncated or corrupt, or hold Python objects that weights_only loading refuses; "

@@ -113,3 +113,49 @@ def test_new_transitions_get_the_max_priority():
     buf.update_priorities(np.array([0]), np.array([5.0]))
     i = buf.add(np.zeros(1), 0, 0.0, np.zeros(1), False)
     assert buf.tree[i] == 5.0
+
+
+def test_gae_by_hand_with_lambda_one_is_discounted_return_minus_value():
+    from rlcore.buffers import gae
+
+    r = np.array([1.0, 2.0, 3.0])
+    v = np.array([0.5, 0.5, 0.5])
+    nv = np.array([0.5, 0.5, 0.0])
+    adv, ret = gae(r, v, nv, terminated=[0, 0, 1], episode_ends=[0, 0, 1], gamma=0.9, lam=1.0)
+    g = np.array([1 + 0.9 * 2 + 0.81 * 3, 2 + 0.9 * 3, 3.0])
+    np.testing.assert_allclose(ret, g)
+    np.testing.assert_allclose(adv, g - v)
+
+
+def test_gae_lambda_zero_is_the_td_error():
+    from rlcore.buffers import gae
+
+    r, v, nv = np.array([1.0, 1.0]), np.array([2.0, 3.0]), np.array([3.0, 4.0])
+    adv, _ = gae(r, v, nv, [0, 0], [0, 0], gamma=0.5, lam=0.0)
+    np.testing.assert_allclose(adv, [1 + 0.5 * 3 - 2, 1 + 0.5 * 4 - 3])
+
+
+def test_gae_truncated_episode_end_bootstraps_but_does_not_leak():
+    from rlcore.buffers import gae
+
+    # step 1 ends an episode by time limit (truncated): V(last obs) = 10 is bootstrapped;
+    # step 2 starts a new episode whose advantage must not flow back into step 1
+    r = np.array([0.0, 1.0, 100.0])
+    v = np.array([0.0, 0.0, 0.0])
+    nv = np.array([0.0, 10.0, 0.0])
+    adv, _ = gae(r, v, nv, terminated=[0, 0, 0], episode_ends=[0, 1, 0], gamma=0.5, lam=1.0)
+    assert adv[1] == 1 + 0.5 * 10           # bootstrapped from the truncated state, nothing from step 2
+    assert adv[0] == 0 + 0.5 * adv[1]
+    # had it been terminated, no bootstrap
+    adv_t, _ = gae(r, v, nv, terminated=[0, 1, 0], episode_ends=[0, 1, 0], gamma=0.5, lam=1.0)
+    assert adv_t[1] == 1.0
+
+
+def test_gae_vectorized_over_envs():
+    from rlcore.buffers import gae
+
+    r = np.ones((4, 2))
+    v = np.zeros((4, 2))
+    adv, _ = gae(r, v, v, np.zeros((4, 2)), np.zeros((4, 2)), gamma=1.0, lam=1.0)
+    np.testing.assert_allclose(adv[:, 0], [4, 3, 2, 1])
+    np.testing.assert_allclose(adv[:, 1], [4, 3, 2, 1])

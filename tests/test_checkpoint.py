@@ -69,8 +69,9 @@ class Evil:
 def test_unsafe_pickle_is_refused(tmp_path):
     path = tmp_path / "evil.pt"
     torch.save({"format": "rlcore-checkpoint", "x": Evil()}, path)
-    with pytest.raises(CheckpointError, match="could not be loaded safely"):
+    with pytest.raises(CheckpointError, match="could not be loaded safely") as err:
         load_checkpoint(path)
+    assert "posix.system" in str(err.value)  # says what was refused
 
 
 def test_foreign_torch_file_is_refused(tmp_path):
@@ -81,3 +82,10 @@ def test_foreign_torch_file_is_refused(tmp_path):
     path.write_bytes(pickle.dumps({"a": 1}))
     with pytest.raises(CheckpointError):
         load_checkpoint(path)
+
+
+def test_numpy_scalars_are_saved_as_python_numbers(tmp_path):
+    save_checkpoint(tmp_path / "c.pt", {"a": np.float64(1.5), "b": np.int64(3), "c": [np.float32(2.0)]})
+    data = load_checkpoint(tmp_path / "c.pt")
+    assert data["a"] == 1.5 and data["b"] == 3 and data["c"] == [2.0]
+    assert type(data["a"]) is float

@@ -120,3 +120,13 @@ def test_dqn_through_the_command_line(tmp_path):
     assert result["algo"] == "dqn" and result["episodes"] == 2
     proc = rlcore("train", "dqn", "--env", "Pendulum-v1", "--steps", 10, "--out", tmp_path / "p", check=False)
     assert proc.returncode == 2 and "discrete action space" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("env_id", ["Pendulum-v1", "CartPole-v1"])
+def test_ppo_through_the_command_line_on_continuous_and_discrete_tasks(env_id, tmp_path):
+    out = tmp_path / "ppo"
+    rlcore("train", "ppo", "--env", env_id, "--steps", 512, "--out", out, "--no-progress",
+           "--set", "n_steps=256", "--set", "objective=kl", "--set", "eval_every=512")
+    assert json.loads((out / "config.json").read_text())["config"]["objective"] == "kl"
+    result = json.loads(rlcore("evaluate", out, "--episodes", 1).stdout.splitlines()[-1])
+    assert result["algo"] == "ppo" and result["train_steps"] == 512

@@ -1,0 +1,456 @@
+"""Proximal Policy Optimization (chapter 6): the clipped objective and the adaptive-KL penalty.
+
+One implementation, two objectives (``Config.objective``):
+
+- ``"clip"``: L = E[ min(r_t A_t, clip(r_t, 1 - eps, 1 + eps) A_t) ]
+- ``"kl"``:   L = E[ r_t A_t ] - beta * KL[pi_old || pi],  beta adapted after every update
+  (the course report's rule: beta <- alpha * beta if KL > beta_high * KL_target,
+  beta <- beta / alpha if KL < beta_low * KL_target)
+
+with r_t = pi(a_t | s_t) / pi_old(a_t | s_t). The loop (Schulman et al. 2017, Algorithm 1):
+
+    for each iteration:
+        run the policy in num_envs environments for n_steps steps
+        compute advantages with GAE(lambda), bootstrapping at time limits
+        for n_epochs epochs, over shuffled minibatches:
+            maximize the surrogate objective, minimize the value loss
+        (kl) adapt beta from the measured KL
+
+Observations and rewards are normalized with Gymnasium's vector wrappers; the observation statistics
+travel with the policy, so evaluation sees observations exactly as training did.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+from rlcore.buffers import gae
+from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.envs import make_env, make_vec_env
+from rlcore.evaluate import evaluate_policy
+from rlcore.logger import CSVLogger
+from rlcore.nets import mlp
+from rlcore.runs import RunDir, config_dict, run_metadata, write_json
+
+POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
+"""Checkpoint keys :func:`load_policy` needs."""
+
+OBJECTIVES = ("clip", "kl")
+
+
+@dataclass
+class Config:
+    """Hyperparameters of PPO (defaults: the PPO paper's MuJoCo settings; report names in brackets)."""
+
+    objective: str = "clip"
+    """``"clip"`` (clipped surrogate) or ``"kl"`` (adaptive KL penalty) [method-index clip(1)/KL(0)]."""
+    num_envs: int = 1
+    """Environments stepped in parallel (a Gymnasium vector environment)."""
+    n_steps: int = 2048
+    """Steps per environment per iteration; a rollout holds n_steps * num_envs transitions [memory-batch]."""
+    batch_size: int = 64
+    """Minibatch size for the gradient steps."""
+    n_epochs: int = 10
+    """Passes over each rollout [action-update-steps, critic-update-steps]."""
+    learning_rate: float = 3e-4
+    """Adam step size (one optimizer for actor and critic)."""
+    anneal_lr: bool = True
+    """Decay the step size linearly to 0 over the run."""
+    gamma: float = 0.99
+    """Discount factor."""
+    gae_lambda: float = 0.95
+    """GAE's lambda: 0 is the one-step TD error, 1 the Monte-Carlo return minus V [lam]."""
+    clip_range: float = 0.2
+    """The clipped objective's epsilon [epsilon]."""
+    kl_target: float = 0.01
+    """The KL penalty's target KL per update [kl-target]."""
+    kl_coef: float = 1.0
+    """The KL penalty's initial coefficient beta (lambda in the report's algorithm box)."""
+    kl_beta_low: float = 1 / 1.5
+    """beta shrinks when KL < kl_beta_low * kl_target [beta-low]."""
+    kl_beta_high: float = 1.5
+    """beta grows when KL > kl_beta_high * kl_target [beta-high]."""
+    kl_alpha: float = 2.0
+    """Factor by which beta grows or shrinks [alpha]."""
+    normalize_advantage: bool = True
+    """Standardize advantages per minibatch (the report's 'advantage value normalization')."""
+    normalize_obs: bool = True
+    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
+    normalize_reward: bool = True
+    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
+    ent_coef: float = 0.0
+    """Entropy bonus weight."""
+    vf_coef: float = 0.5
+    """Value-loss weight."""
+    max_grad_norm: float = 0.5
+    """Clip the gradient's global norm to this."""
+    hidden: tuple[int, ...] = (64, 64)
+    """Hidden layers of the actor and of the critic (separate networks, tanh) [hidden-size]."""
+    log_std_init: float = 0.0
+    """Initial log standard deviation of the Gaussian policy (continuous actions)."""
+    eval_every: int = 10_000
+    """Evaluate the deterministic policy after the first iteration past every this many steps (0: never)."""
+    eval_episodes: int = 5
+    """Episodes per evaluation."""
+    checkpoint_every: int = 50_000
+    """Write checkpoint.pt after the first iteration past every this many steps (and at the end, and on Ctrl-C)."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments for ``gymnasium.make``."""
+
+    def __post_init__(self) -> None:
+        self.hidden = tuple(int(h) for h in self.hidden)
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
+        if self.batch_size > self.n_steps * self.num_envs:
+            raise ValueError("batch_size must be <= n_steps * num_envs")
+
+
+# --- the objective, one small function each ----------------------------------------------------
+
+
+def clipped_surrogate(ratio: torch.Tensor, advantages: torch.Tensor, clip_range: float) -> torch.Tensor:
+    """-E[min(r A, clip(r, 1-eps, 1+eps) A)]: the clipped objective, negated to be minimized."""
+    unclipped = ratio * advantages
+    clipped = torch.clamp(ratio, 1.0 - clip_range, 1.0 + clip_range) * advantages
+    return -torch.min(unclipped, clipped).mean()
+
+
+def kl_penalty_surrogate(ratio: torch.Tensor, advantages: torch.Tensor, kl: torch.Tensor, beta: float) -> torch.Tensor:
+    """-(E[r A] - beta * KL[pi_old || pi]): the KL-penalized objective, negated to be minimized."""
+    return -(ratio * advantages).mean() + beta * kl
+
+
+def approx_kl(logp_old: torch.Tensor, logp_new: torch.Tensor) -> torch.Tensor:
+    """KL[pi_old || pi] estimated from samples of pi_old: E[(r - 1) - log r] (never negative)."""
+    log_ratio = logp_new - logp_old
+    return (torch.exp(log_ratio) - 1.0 - log_ratio).mean()
+
+
+def adaptive_kl_coef(beta: float, kl: float, kl_target: float, beta_low: float, beta_high: float, alpha: float) -> float:
+    """The report's rule: grow beta by alpha above beta_high * target, shrink it below beta_low * target."""
+    if kl > beta_high * kl_target:
+        return beta * alpha
+    if kl < beta_low * kl_target:
+        return beta / alpha
+    return beta
+
+
+def normalize(x: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
+    """(x - mean) / std."""
+    return (x - x.mean()) / (x.std() + eps)
+
+
+# --- the networks ------------------------------------------------------------------------------
+
+
+class ActorCritic(nn.Module):
+    """A Gaussian (continuous) or categorical (discrete) policy pi(a|s) and a value function V(s)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, discrete: bool, hidden=(64, 64), log_std_init: float = 0.0):
+        super().__init__()
+        self.discrete = discrete
+        self.actor = mlp([obs_dim, *hidden, act_dim], activation=nn.Tanh)
+        self.critic = mlp([obs_dim, *hidden, 1], activation=nn.Tanh)
+        self.log_std = None if discrete else nn.Parameter(torch.full((act_dim,), float(log_std_init)))
+        for net, last_gain in ((self.actor, 0.01), (self.critic, 1.0)):  # orthogonal init, small policy output
+            linears = [m for m in net if isinstance(m, nn.Linear)]
+            for m in linears:
+                nn.init.orthogonal_(m.weight, gain=last_gain if m is linears[-1] else np.sqrt(2))
+                nn.init.zeros_(m.bias)
+
+    def distribution(self, obs: torch.Tensor) -> torch.distributions.Distribution:
+        out = self.actor(obs)
+        if self.discrete:
+            return torch.distributions.Categorical(logits=out)
+        return torch.distributions.Normal(out, self.log_std.exp().expand_as(out))
+
+    def log_prob(self, dist: torch.distributions.Distribution, actions: torch.Tensor) -> torch.Tensor:
+        lp = dist.log_prob(actions)
+        return lp if self.discrete else lp.sum(-1)
+
+    def value(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.critic(obs).squeeze(-1)
+
+    def deterministic(self, obs: torch.Tensor) -> torch.Tensor:
+        out = self.actor(obs)
+        return out.argmax(-1) if self.discrete else out
+
+
+class PPOPolicy:
+    """The deterministic policy (Gaussian mean, or most likely action) with training's observation scaling."""
+
+    def __init__(self, agent: ActorCritic, obs_mean=None, obs_var=None, obs_clip: float = 10.0, low=None, high=None):
+        self.agent = agent.eval()
+        self.obs_mean = None if obs_mean is None else np.asarray(obs_mean)
+        self.obs_var = None if obs_var is None else np.asarray(obs_var)
+        self.obs_clip = obs_clip
+        self.low, self.high = low, high
+
+    def __call__(self, obs):
+        x = np.asarray(obs, dtype=np.float64)
+        if self.obs_mean is not None:
+            x = np.clip((x - self.obs_mean) / np.sqrt(self.obs_var + 1e-8), -self.obs_clip, self.obs_clip)
+        with torch.no_grad():
+            a = self.agent.deterministic(torch.as_tensor(x, dtype=torch.float32).unsqueeze(0))[0].numpy()
+        if self.agent.discrete:
+            return int(a)
+        return np.clip(a, self.low, self.high)
+
+
+def _spaces(env: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str, Any]:
+    obs = getattr(env, "single_observation_space", env.observation_space)
+    act = getattr(env, "single_action_space", env.action_space)
+    if not isinstance(obs, gym.spaces.Box) or len(obs.shape) != 1:
+        raise ValueError(f"rlcore's PPO takes flat vector observations, but {env_id} has {obs}.")
+    if isinstance(act, gym.spaces.Discrete):
+        return {"obs_dim": int(obs.shape[0]), "act_dim": int(act.n), "discrete": True}
+    if isinstance(act, gym.spaces.Box) and len(act.shape) == 1:
+        return {"obs_dim": int(obs.shape[0]), "act_dim": int(act.shape[0]), "discrete": False,
+                "low": act.low.tolist(), "high": act.high.tolist()}
+    raise ValueError(f"rlcore's PPO needs a Discrete or a flat Box action space, but {env_id} has {act}.")
+
+
+def make_envs(env_id: str, config: Config, seed: int) -> gym.vector.VectorEnv:
+    """The training environments: vectorized, statistics recorded on raw rewards, then normalized."""
+    envs = make_vec_env(env_id, config.num_envs, seed=seed, **config.env_kwargs)
+    if isinstance(envs.single_action_space, gym.spaces.Box):
+        envs = gym.wrappers.vector.ClipAction(envs)
+    if config.normalize_obs:
+        envs = gym.wrappers.vector.NormalizeObservation(envs)
+        envs = gym.wrappers.vector.TransformObservation(envs, lambda o: np.clip(o, -10, 10))
+    if config.normalize_reward:
+        envs = gym.wrappers.vector.NormalizeReward(envs, gamma=config.gamma)
+        envs = gym.wrappers.vector.TransformReward(envs, lambda r: np.clip(r, -10, 10))
+    return envs
+
+
+def _find(envs, cls):
+    while not isinstance(envs, cls):
+        if not hasattr(envs, "env"):
+            return None
+        envs = envs.env
+    return envs
+
+
+@dataclass
+class Result:
+    agent: ActorCritic
+    policy: PPOPolicy
+    episode_returns: np.ndarray
+    episode_end_steps: np.ndarray
+    eval_steps: np.ndarray
+    eval_returns: np.ndarray
+    steps: int
+
+
+def train(
+    env_id: str,
+    config: Config | None = None,
+    steps: int = 1_000_000,
+    seed: int = 0,
+    out: str | Path | None = None,
+    progress: bool = False,
+) -> Result:
+    """Train PPO for (at least) ``steps`` environment steps, in whole iterations."""
+    config = config or Config()
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    envs = make_envs(env_id, config, seed)
+    spaces = _spaces(envs, env_id)
+    agent = ActorCritic(spaces["obs_dim"], spaces["act_dim"], spaces["discrete"], config.hidden, config.log_std_init)
+    optimizer = torch.optim.Adam(agent.parameters(), lr=config.learning_rate, eps=1e-5)
+    obs_norm = _find(envs, gym.wrappers.vector.NormalizeObservation)
+    rew_norm = _find(envs, gym.wrappers.vector.NormalizeReward)
+    eval_env = make_env(env_id, **config.env_kwargs)
+    n_envs, T = config.num_envs, config.n_steps
+    per_iter = T * n_envs
+    iterations = -(-steps // per_iter)
+    step = iteration = 0
+    kl_coef = config.kl_coef
+    returns: list[float] = []
+    end_steps: list[int] = []
+    evals: list[tuple[int, float]] = []
+
+    def policy() -> PPOPolicy:
+        mean = obs_norm.obs_rms.mean.copy() if obs_norm else None
+        var = obs_norm.obs_rms.var.copy() if obs_norm else None
+        return PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
+
+    run = RunDir(out) if out is not None else None
+    log = eval_log = None
+    if run is not None:
+        if run.checkpoint.exists():
+            ckpt = load_checkpoint(run.checkpoint)
+            if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != ("ppo", env_id, seed):
+                raise ValueError(f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} "
+                                 f"(seed {ckpt.get('seed')}); choose another --out folder or delete it.")
+            agent.load_state_dict(ckpt["agent"])
+            optimizer.load_state_dict(ckpt["optimizer"])
+            step, iteration, kl_coef = int(ckpt["step"]), int(ckpt["iteration"]), float(ckpt["kl_coef"])
+            rng.bit_generator.state = ckpt["rng"]
+            torch.set_rng_state(ckpt["torch_rng"])
+            if obs_norm is not None:
+                obs_norm.obs_rms.mean, obs_norm.obs_rms.var = ckpt["obs_mean"].numpy(), ckpt["obs_var"].numpy()
+                obs_norm.obs_rms.count = float(ckpt["obs_count"])
+            if rew_norm is not None:
+                rew_norm.return_rms.mean, rew_norm.return_rms.var = ckpt["ret_mean"].numpy(), ckpt["ret_var"].numpy()
+                rew_norm.return_rms.count = float(ckpt["ret_count"])
+        else:
+            write_json(run.config, {"algo": "ppo", "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
+            write_json(run.meta, run_metadata(algo="ppo", env_id=env_id, seed=seed, steps=steps))
+        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length"])
+        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
+        upd_log = CSVLogger(run.root / "updates.csv", ["iteration", "step", "policy_loss", "value_loss", "entropy",
+                                                       "approx_kl", "clip_fraction", "kl_coef", "learning_rate"])
+
+    def checkpoint() -> None:
+        if run is None:
+            return
+        state = {"algo": "ppo", "env_id": env_id, "seed": seed, "config": config_dict(config), "step": step,
+                 "iteration": iteration, "total_steps": steps, "complete": iteration >= iterations,
+                 "episode": len(returns), "agent": agent.state_dict(), "optimizer": optimizer.state_dict(),
+                 "kl_coef": kl_coef, "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+                 "spaces": spaces, "obs_clip": 10.0}
+        if obs_norm is not None:
+            state.update(obs_mean=obs_norm.obs_rms.mean, obs_var=obs_norm.obs_rms.var, obs_count=float(obs_norm.obs_rms.count))
+        else:
+            state.update(obs_mean=None, obs_var=None)
+        if rew_norm is not None:
+            state.update(ret_mean=rew_norm.return_rms.mean, ret_var=rew_norm.return_rms.var,
+                         ret_count=float(rew_norm.return_rms.count))
+        save_checkpoint(run.checkpoint, state)
+
+    obs_buf = np.zeros((T, n_envs, spaces["obs_dim"]), dtype=np.float32)
+    act_buf = np.zeros((T, n_envs) if spaces["discrete"] else (T, n_envs, spaces["act_dim"]), dtype=np.float32)
+    logp_buf, rew_buf, val_buf, next_val_buf, term_buf, end_buf, valid_buf = (
+        np.zeros((T, n_envs), dtype=np.float32) for _ in range(7))
+    # Gymnasium's vector envs reset an ended episode on the *next* step, which ignores its action:
+    # such "reset steps" are recorded but never learned from.
+    ended = np.zeros(n_envs, dtype=bool)
+
+    obs, _ = envs.reset(seed=seed + 1_000 * iteration)
+    bar = tqdm(total=iterations * per_iter, initial=min(step, iterations * per_iter), disable=not progress,
+               unit="step", desc=f"PPO-{config.objective} {env_id}")
+    try:
+        while iteration < iterations:
+            lr = config.learning_rate * (1.0 - iteration / iterations if config.anneal_lr else 1.0)
+            for g in optimizer.param_groups:
+                g["lr"] = lr
+            # 1. run the policy for T steps in each environment
+            for t in range(T):
+                with torch.no_grad():
+                    x = torch.as_tensor(obs, dtype=torch.float32)
+                    dist = agent.distribution(x)
+                    action = dist.sample()
+                    logp_buf[t] = agent.log_prob(dist, action).numpy()
+                    val_buf[t] = agent.value(x).numpy()
+                a = action.numpy()
+                next_obs, reward, terminated, truncated, info = envs.step(a)
+                obs_buf[t], act_buf[t], rew_buf[t] = obs, a, reward
+                valid_buf[t] = ~ended
+                ended = terminated | truncated
+                term_buf[t], end_buf[t] = terminated, ended | ~valid_buf[t].astype(bool)
+                if "episode" in info:
+                    for i in np.flatnonzero(info["_episode"]):
+                        returns.append(float(info["episode"]["r"][i]))
+                        end_steps.append(step + (t + 1) * n_envs)
+                        if log is not None:
+                            log.log(episode=len(returns), step=end_steps[-1], episode_return=returns[-1],
+                                    episode_length=int(info["episode"]["l"][i]))
+                with torch.no_grad():  # V(s_{t+1}); at a time limit, s_{t+1} is the episode's last state
+                    next_val_buf[t] = agent.value(torch.as_tensor(next_obs, dtype=torch.float32)).numpy()
+                obs = next_obs
+            step += per_iter
+            # 2. advantages
+            adv, ret = gae(rew_buf, val_buf, next_val_buf, term_buf, end_buf, config.gamma, config.gae_lambda)
+            keep = valid_buf.reshape(-1).astype(bool)
+            b_obs = torch.as_tensor(obs_buf.reshape(per_iter, -1)[keep])
+            b_act = torch.as_tensor(act_buf.reshape(per_iter, *act_buf.shape[2:])[keep])
+            b_logp = torch.as_tensor(logp_buf.reshape(-1)[keep])
+            b_adv = torch.as_tensor(adv.reshape(-1)[keep], dtype=torch.float32)
+            b_ret = torch.as_tensor(ret.reshape(-1)[keep], dtype=torch.float32)
+            n = len(b_obs)
+            n_batches = max(n // config.batch_size, 1)
+            # 3. n_epochs passes of minibatch gradient steps
+            stats = []
+            for _ in range(config.n_epochs):
+                for idx in np.array_split(rng.permutation(n), n_batches):
+                    dist = agent.distribution(b_obs[idx])
+                    logp = agent.log_prob(dist, b_act[idx])
+                    ratio = torch.exp(logp - b_logp[idx])
+                    a_mb = normalize(b_adv[idx]) if config.normalize_advantage else b_adv[idx]
+                    kl = approx_kl(b_logp[idx], logp)
+                    if config.objective == "clip":
+                        policy_loss = clipped_surrogate(ratio, a_mb, config.clip_range)
+                    else:
+                        policy_loss = kl_penalty_surrogate(ratio, a_mb, kl, kl_coef)
+                    value_loss = 0.5 * ((agent.value(b_obs[idx]) - b_ret[idx]) ** 2).mean()
+                    entropy = (dist.entropy() if spaces["discrete"] else dist.entropy().sum(-1)).mean()
+                    loss = policy_loss + config.vf_coef * value_loss - config.ent_coef * entropy
+                    optimizer.zero_grad(set_to_none=True)
+                    loss.backward()
+                    nn.utils.clip_grad_norm_(agent.parameters(), config.max_grad_norm)
+                    optimizer.step()
+                    clip_frac = ((ratio - 1.0).abs() > config.clip_range).float().mean()
+                    stats.append([policy_loss.item(), value_loss.item(), entropy.item(), kl.item(), clip_frac.item()])
+            mean_kl = float(np.mean([s[3] for s in stats[-n_batches:]]))  # over the last epoch
+            if config.objective == "kl":
+                kl_coef = adaptive_kl_coef(kl_coef, mean_kl, config.kl_target, config.kl_beta_low,
+                                           config.kl_beta_high, config.kl_alpha)
+            iteration += 1
+            if run is not None:
+                m = np.mean(stats, axis=0)
+                upd_log.log(iteration=iteration, step=step, policy_loss=m[0], value_loss=m[1], entropy=m[2],
+                            approx_kl=mean_kl, clip_fraction=m[4], kl_coef=kl_coef, learning_rate=lr)
+            crossed = lambda every: every and step // every > (step - per_iter) // every  # noqa: E731
+            if crossed(config.eval_every) or (config.eval_every and iteration == iterations):
+                r = evaluate_policy(policy(), eval_env, config.eval_episodes, seed=seed + 10_000)
+                agent.train()
+                evals.append((step, float(r.mean())))
+                if eval_log is not None:
+                    eval_log.log(step=step, mean_return=float(r.mean()), std_return=float(r.std()), episodes=len(r))
+            if crossed(config.checkpoint_every):
+                checkpoint()
+            bar.update(per_iter)
+            if returns:
+                bar.set_postfix(ret=f"{np.mean(returns[-10:]):.1f}", refresh=False)
+    except KeyboardInterrupt:
+        checkpoint()
+        raise
+    finally:
+        bar.close()
+        envs.close()
+        eval_env.close()
+        if run is not None:
+            for f in (log, eval_log, upd_log):
+                f.close()
+    checkpoint()
+    return Result(agent, policy(), np.array(returns), np.array(end_steps, dtype=int),
+                  np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step)
+
+
+# --- what the command line needs ----------------------------------------------------------------
+
+
+def make_config(algo: str, **overrides: Any) -> Config:
+    return Config(**overrides)
+
+
+def load_policy(ckpt: dict[str, Any]) -> PPOPolicy:
+    sp = ckpt["spaces"]
+    config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
+    agent = ActorCritic(sp["obs_dim"], sp["act_dim"], sp["discrete"], config.hidden)
+    agent.load_state_dict(ckpt["agent"])
+    mean, var = ckpt.get("obs_mean"), ckpt.get("obs_var")
+    to_np = lambda t: None if t is None else t.numpy()  # noqa: E731
+    low = np.array(sp["low"], dtype=np.float32) if "low" in sp else None
+    high = np.array(sp["high"], dtype=np.float32) if "high" in sp else None
+    return PPOPolicy(agent, to_np(mean), to_np(var), float(ckpt.get("obs_clip", 10.0)), low, high)

@@ -1,0 +1,105 @@
+import numpy as np
+import pytest
+import torch
+
+from rlcore.envs import make_env
+from rlcore.evaluate import evaluate_policy
+from rlcore.ppo import (
+    ActorCritic, Config, adaptive_kl_coef, approx_kl, clipped_surrogate, kl_penalty_surrogate, load_policy, train,
+)
+
+
+def _grad_of_ratio(loss_fn, ratio_value, advantage):
+    ratio = torch.tensor([ratio_value], requires_grad=True)
+    loss_fn(ratio, torch.tensor([advantage])).backward()
+    return ratio.grad.item()
+
+
+@pytest.mark.parametrize("ratio, adv, zero", [
+    (1.5, +1.0, True),    # good action already made much more likely: no further push
+    (0.5, -1.0, True),    # bad action already made much less likely: no further push
+    (1.5, -1.0, False),   # bad action made MORE likely: the gradient still pulls it back
+    (0.5, +1.0, False),   # good action made LESS likely: still pushed up
+    (1.1, +1.0, False),   # inside the clip range: ordinary policy gradient
+])
+def test_clipped_surrogate_gradient_is_zero_only_outside_the_range_in_the_improving_direction(ratio, adv, zero):
+    g = _grad_of_ratio(lambda r, a: clipped_surrogate(r, a, 0.2), ratio, adv)
+    if zero:
+        assert g == 0.0
+    else:
+        assert g == pytest.approx(-adv)  # d(-r A)/dr
+
+
+def test_clipped_surrogate_value_by_hand():
+    ratio = torch.tensor([0.5, 1.0, 1.5])
+    adv = torch.tensor([1.0, 2.0, 1.0])
+    # min(r A, clip(r) A) = [0.5*1 vs 0.8*1 -> 0.5, 2, 1.5 vs 1.2 -> 1.2]
+    assert clipped_surrogate(ratio, adv, 0.2).item() == pytest.approx(-(0.5 + 2.0 + 1.2) / 3)
+
+
+def test_kl_penalty_surrogate_by_hand():
+    loss = kl_penalty_surrogate(torch.tensor([1.0, 2.0]), torch.tensor([1.0, 1.0]), torch.tensor(0.3), beta=2.0)
+    assert loss.item() == pytest.approx(-1.5 + 0.6)
+
+
+def test_adaptive_kl_coefficient_follows_the_reports_rule():
+    # report, Table 5: beta-low 1/1.5, beta-high 1.5, alpha 2, kl-target 0.01
+    rule = dict(kl_target=0.01, beta_low=1 / 1.5, beta_high=1.5, alpha=2.0)
+    assert adaptive_kl_coef(1.0, 0.02, **rule) == 2.0     # KL above 1.5 x target: penalty doubles
+    assert adaptive_kl_coef(1.0, 0.005, **rule) == 0.5    # KL below target / 1.5: penalty halves
+    assert adaptive_kl_coef(1.0, 0.01, **rule) == 1.0     # in between: unchanged
+    assert adaptive_kl_coef(1.0, 0.015, **rule) == 1.0    # the boundaries themselves do not move it
+
+
+def test_approx_kl_is_zero_for_the_same_policy_and_positive_otherwise():
+    lp = torch.log(torch.tensor([0.2, 0.5, 0.3]))
+    assert approx_kl(lp, lp).item() == pytest.approx(0.0)
+    assert approx_kl(lp, lp + torch.tensor([0.1, -0.2, 0.3])).item() > 0
+    # the estimator is unbiased: compare with the exact KL of two Gaussians from samples of the old one
+    torch.manual_seed(0)
+    old, new = torch.distributions.Normal(0.0, 1.0), torch.distributions.Normal(0.3, 1.2)
+    x = old.sample((200_000,))
+    exact = torch.distributions.kl_divergence(old, new).item()
+    assert approx_kl(old.log_prob(x), new.log_prob(x)).item() == pytest.approx(exact, rel=0.03)
+
+
+def test_actor_critic_heads():
+    torch.manual_seed(0)
+    cont = ActorCritic(3, 2, discrete=False)
+    d = cont.distribution(torch.zeros(4, 3))
+    assert d.sample().shape == (4, 2) and cont.value(torch.zeros(4, 3)).shape == (4,)
+    assert cont.log_prob(d, torch.zeros(4, 2)).shape == (4,)
+    disc = ActorCritic(3, 5, discrete=True)
+    assert disc.deterministic(torch.zeros(4, 3)).shape == (4,)
+
+
+def test_bad_spaces_are_clear_errors():
+    with pytest.raises(ValueError, match="flat vector observations"):
+        train("FrozenLake-v1", steps=10)
+    with pytest.raises(ValueError, match="objective"):
+        Config(objective="trpo")
+
+
+SMALL = dict(num_envs=2, n_steps=256, batch_size=64, n_epochs=4, learning_rate=1e-3, eval_every=0)
+
+
+@pytest.mark.parametrize("objective", ["clip", "kl"])
+def test_short_run_on_cartpole_beats_random(objective):
+    torch.set_num_threads(1)
+    result = train("CartPole-v1", Config(objective=objective, **SMALL), steps=15_000, seed=0)
+    returns = evaluate_policy(result.policy, make_env("CartPole-v1"), episodes=5, seed=7)
+    assert returns.mean() > 100, returns  # a random policy averages about 22
+
+
+def test_checkpoint_policy_matches_and_carries_observation_scaling(tmp_path):
+    torch.set_num_threads(1)
+    from rlcore.checkpoint import load_checkpoint
+
+    result = train("Pendulum-v1", Config(**SMALL), steps=1_024, seed=0, out=tmp_path)
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
+    policy = load_policy(ckpt)
+    np.testing.assert_allclose(policy.obs_mean, result.policy.obs_mean)
+    obs = np.array([0.5, -0.5, 1.0])
+    np.testing.assert_allclose(policy(obs), result.policy(obs))
+    assert np.all(np.abs(policy(obs)) <= 2.0)  # within Pendulum's action bounds
+    assert (tmp_path / "updates.csv").exists()
