@@ -21,6 +21,7 @@ ALGORITHMS: dict[str, str] = {
     "sarsa": "rlcore.tabular",
     "dqn": "rlcore.dqn",
     "ppo": "rlcore.ppo",
+    "ddpg": "rlcore.ddpg",
 }
 
 

@@ -130,3 +130,13 @@ def test_ppo_through_the_command_line_on_continuous_and_discrete_tasks(env_id, t
     assert json.loads((out / "config.json").read_text())["config"]["objective"] == "kl"
     result = json.loads(rlcore("evaluate", out, "--episodes", 1).stdout.splitlines()[-1])
     assert result["algo"] == "ppo" and result["train_steps"] == 512
+
+
+def test_ddpg_through_the_command_line(tmp_path):
+    out = tmp_path / "ddpg"
+    rlcore("train", "ddpg", "--env", "Pendulum-v1", "--steps", 400, "--out", out, "--no-progress",
+           "--set", "learning_starts=200", "--set", "hidden=[32]", "--set", "exploration=ou", "--set", "eval_every=400")
+    result = json.loads(rlcore("evaluate", out, "--episodes", 1).stdout.splitlines()[-1])
+    assert result["algo"] == "ddpg" and result["train_steps"] == 400
+    proc = rlcore("train", "ddpg", "--env", "CartPole-v1", "--steps", 10, "--out", tmp_path / "c", check=False)
+    assert proc.returncode == 2 and "continuous" in proc.stderr and "Traceback" not in proc.stderr

@@ -1,0 +1,322 @@
+"""Deep Deterministic Policy Gradient (chapter 5), the course report's Algorithm 1.
+
+    initialize critic Q(s,a|theta^Q), actor mu(s|theta^mu), targets Q', mu' as copies, replay memory R
+    for each step:
+        a_t = mu(s_t) + N_t                       (exploration: Gaussian with decay, OU, or parameter noise)
+        store (s_t, a_t, r_t, s_{t+1}, terminated) in R
+        sample a minibatch from R
+        y_i = r_i + gamma * Q'(s_{i+1}, mu'(s_{i+1}))            (no bootstrap at terminal states)
+        update the critic by minimizing (1/N) sum (y_i - Q(s_i, a_i))^2
+        update the actor along (1/N) sum grad_a Q(s, a)|_{a = mu(s_i)} grad_theta mu(s_i)
+        theta' <- tau theta + (1 - tau) theta'   for both targets
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+from rlcore.buffers import ReplayBuffer
+from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.dqn import soft_update
+from rlcore.envs import make_env
+from rlcore.evaluate import evaluate_policy
+from rlcore.logger import CSVLogger
+from rlcore.nets import mlp
+from rlcore.noise import AdaptiveParamNoise, GaussianNoise, OrnsteinUhlenbeckNoise, action_distance
+from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_json
+
+POLICY_KEYS = ("actor", "spaces")
+"""Checkpoint keys :func:`load_policy` needs."""
+
+EXPLORATION = ("gaussian", "ou", "param", "none")
+
+
+@dataclass
+class Config:
+    """Hyperparameters of DDPG ("modern" defaults; the report's names in brackets)."""
+
+    hidden: tuple[int, ...] = (256, 256)
+    """Hidden layers of actor and critic [hidden-size; the report used one hidden layer]."""
+    actor_lr: float = 1e-3
+    """Actor's Adam step size [LR-A]."""
+    critic_lr: float = 1e-3
+    """Critic's Adam step size [LR-C]."""
+    gamma: float = 0.99
+    """Discount factor [GAMMA]."""
+    tau: float = 0.005
+    """Soft target-update rate [TAU]."""
+    buffer_size: int = 1_000_000
+    """Replay memory capacity [memory-size]."""
+    batch_size: int = 256
+    """Minibatch size [batch-size]."""
+    learning_starts: int = 10_000
+    """Uniformly random actions for this many steps before learning [start-step]."""
+    exploration: str = "gaussian"
+    """``gaussian``, ``ou`` (Ornstein-Uhlenbeck), ``param`` (adaptive parameter noise) or ``none`` [use-explore]."""
+    noise_sigma: float = 0.1
+    """Scale of the action noise (in units of the action range's half-width), or the initial parameter-noise std."""
+    explore_decay: float = 1.0
+    """Gaussian noise: sigma is multiplied by this after every step [explore-decay]."""
+    param_noise_target: float = 0.2
+    """Parameter noise: target distance between perturbed and unperturbed actions."""
+    reward_scale: float = 1.0
+    """Rewards are multiplied by this for learning (Gymnasium's TransformReward) [reward-factor]."""
+    eval_every: int = 10_000
+    """Evaluate the deterministic policy every this many steps (0: never)."""
+    eval_episodes: int = 5
+    """Episodes per evaluation."""
+    checkpoint_every: int = 50_000
+    """Write checkpoint.pt every this many steps (and at the end, and on Ctrl-C)."""
+    replay_in_checkpoint: bool = True
+    """Save the replay memory in the checkpoint so that a resumed run continues where it was."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments for ``gymnasium.make``."""
+
+    def __post_init__(self) -> None:
+        self.hidden = tuple(int(h) for h in self.hidden)
+        if self.exploration not in EXPLORATION:
+            raise ValueError(f"exploration must be one of {EXPLORATION}, got {self.exploration!r}")
+
+
+class Actor(nn.Module):
+    """mu(s) = tanh(f(s)), scaled to the action box."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden, low, high):
+        super().__init__()
+        self.net = mlp([obs_dim, *hidden, act_dim], output_activation=nn.Tanh)
+        self.register_buffer("scale", torch.as_tensor((np.asarray(high) - np.asarray(low)) / 2, dtype=torch.float32))
+        self.register_buffer("center", torch.as_tensor((np.asarray(high) + np.asarray(low)) / 2, dtype=torch.float32))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.center + self.scale * self.net(obs)
+
+
+class Critic(nn.Module):
+    """Q(s, a): the state and the action concatenated into one MLP."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden):
+        super().__init__()
+        self.net = mlp([obs_dim + act_dim, *hidden, 1])
+
+    def forward(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.net(torch.cat([obs, action], dim=-1)).squeeze(-1)
+
+
+def critic_target(actor_target: nn.Module, critic_target_net: nn.Module, next_obs: torch.Tensor,
+                  rewards: torch.Tensor, terminated: torch.Tensor, gamma: float) -> torch.Tensor:
+    """y = r + gamma * Q'(s', mu'(s')), and y = r at terminal states (truncation still bootstraps)."""
+    with torch.no_grad():
+        next_q = critic_target_net(next_obs, actor_target(next_obs))
+    return rewards + gamma * (1.0 - terminated) * next_q
+
+
+def critic_loss(critic: nn.Module, obs: torch.Tensor, actions: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """L = (1/N) sum_i (y_i - Q(s_i, a_i))^2."""
+    return ((critic(obs, actions) - y) ** 2).mean()
+
+
+def actor_loss(actor: nn.Module, critic: nn.Module, obs: torch.Tensor) -> torch.Tensor:
+    """-(1/N) sum_i Q(s_i, mu(s_i)): its gradient is the deterministic policy gradient, through the critic."""
+    return -critic(obs, actor(obs)).mean()
+
+
+class DeterministicPolicy:
+    """mu(s) for one observation, as a NumPy action."""
+
+    def __init__(self, actor: nn.Module):
+        self.actor = actor.eval()
+
+    def __call__(self, obs):
+        with torch.no_grad():
+            return self.actor(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0))[0].numpy()
+
+
+def check_spaces(env: gym.Env, env_id: str) -> dict[str, Any]:
+    obs, act = env.observation_space, env.action_space
+    if not isinstance(act, gym.spaces.Box):
+        raise ValueError(f"DDPG needs a continuous (Box) action space, but {env_id} has {act}. "
+                         "For discrete actions use dqn or ppo.")
+    if not isinstance(obs, gym.spaces.Box) or len(obs.shape) != 1:
+        raise ValueError(f"rlcore's DDPG takes flat vector observations, but {env_id} has {obs}.")
+    return {"obs_dim": int(obs.shape[0]), "act_dim": int(act.shape[0]), "low": act.low.tolist(), "high": act.high.tolist()}
+
+
+@dataclass
+class Result:
+    actor: nn.Module
+    critic: nn.Module
+    episode_returns: np.ndarray
+    episode_end_steps: np.ndarray
+    eval_steps: np.ndarray
+    eval_returns: np.ndarray
+    steps: int
+
+
+def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
+          out: str | Path | None = None, progress: bool = False) -> Result:
+    """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint)."""
+    config = config or Config()
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    env = make_env(env_id, seed=seed, **config.env_kwargs)
+    sp = check_spaces(env, env_id)
+    if config.reward_scale != 1.0:
+        env = gym.wrappers.TransformReward(env, lambda r: config.reward_scale * r)
+    eval_env = make_env(env_id, **config.env_kwargs)
+    low, high = np.array(sp["low"]), np.array(sp["high"])
+    actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, low, high)
+    critic = Critic(sp["obs_dim"], sp["act_dim"], config.hidden)
+    actor_t, critic_t = copy.deepcopy(actor), copy.deepcopy(critic)
+    actor_opt = torch.optim.Adam(actor.parameters(), lr=config.actor_lr, fused=True)
+    critic_opt = torch.optim.Adam(critic.parameters(), lr=config.critic_lr, fused=True)
+    buffer = ReplayBuffer(config.buffer_size, (sp["obs_dim"],), (sp["act_dim"],), np.float32, seed=seed)
+    half = (high - low) / 2
+    if config.exploration == "gaussian":
+        noise = GaussianNoise(sp["act_dim"], config.noise_sigma, config.explore_decay, seed=seed)
+    elif config.exploration == "ou":
+        noise = OrnsteinUhlenbeckNoise(sp["act_dim"], sigma=config.noise_sigma, seed=seed)
+    else:
+        noise = None
+    param_noise = AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed) if config.exploration == "param" else None
+    step = episode = 0
+    returns: list[float] = []
+    end_steps: list[int] = []
+    evals: list[tuple[int, float]] = []
+
+    run = RunDir(out) if out is not None else None
+    log = eval_log = None
+    if run is not None:
+        if run.checkpoint.exists():
+            ckpt = load_checkpoint(run.checkpoint)
+            if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != ("ddpg", env_id, seed):
+                raise ValueError(f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} "
+                                 f"(seed {ckpt.get('seed')}); choose another --out folder or delete it.")
+            for mod, key in ((actor, "actor"), (critic, "critic"), (actor_t, "actor_target"), (critic_t, "critic_target"),
+                             (actor_opt, "actor_opt"), (critic_opt, "critic_opt")):
+                mod.load_state_dict(ckpt[key])
+            if "replay" in ckpt:
+                buffer.load_state_dict({k: (v.numpy() if isinstance(v, torch.Tensor) else v) for k, v in ckpt["replay"].items()})
+            step, episode = int(ckpt["step"]), int(ckpt["episode"])
+            rng.bit_generator.state = ckpt["rng"]
+            torch.set_rng_state(ckpt["torch_rng"])
+            if noise is not None and hasattr(noise, "sigma") and "noise_sigma" in ckpt:
+                noise.sigma = float(ckpt["noise_sigma"])
+            if param_noise is not None and "noise_sigma" in ckpt:
+                param_noise.sigma = float(ckpt["noise_sigma"])
+        else:
+            write_json(run.config, {"algo": "ddpg", "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
+            write_json(run.meta, run_metadata(algo="ddpg", env_id=env_id, seed=seed, steps=steps))
+        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "noise_sigma"])
+        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
+
+    def noise_sigma() -> float:
+        src = param_noise if param_noise is not None else noise
+        return float(getattr(src, "sigma", 0.0))
+
+    def checkpoint() -> None:
+        if run is None:
+            return
+        state = {"algo": "ddpg", "env_id": env_id, "seed": seed, "config": config_dict(config), "step": step,
+                 "episode": episode, "total_steps": steps, "complete": step >= steps, "spaces": sp,
+                 "actor": actor.state_dict(), "critic": critic.state_dict(), "actor_target": actor_t.state_dict(),
+                 "critic_target": critic_t.state_dict(), "actor_opt": actor_opt.state_dict(),
+                 "critic_opt": critic_opt.state_dict(), "rng": rng.bit_generator.state,
+                 "torch_rng": torch.get_rng_state(), "noise_sigma": noise_sigma()}
+        if config.replay_in_checkpoint:
+            state["replay"] = buffer.state_dict()
+        save_checkpoint(run.checkpoint, state)
+
+    obs, _ = env.reset(seed=episode_seed(seed, episode))
+    behaviour = param_noise.perturb(actor) if param_noise is not None else actor
+    ep_return, ep_len = 0.0, 0
+    bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step", desc=f"DDPG {env_id}")
+    try:
+        while step < steps:
+            # a_t = mu(s_t) + N_t
+            if step < config.learning_starts:
+                action = rng.uniform(low, high).astype(np.float32)
+            else:
+                with torch.no_grad():
+                    action = behaviour(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0))[0].numpy()
+                if noise is not None:
+                    action = np.clip(action + half * noise(), low, high).astype(np.float32)
+            next_obs, reward, terminated, truncated, info = env.step(action)
+            buffer.add(obs, action, reward, next_obs, terminated)
+            obs = next_obs
+            step += 1
+            ep_len += 1
+            if terminated or truncated:
+                episode += 1
+                ep_return = float(info["episode"]["r"])  # raw reward, before reward_scale
+                returns.append(ep_return)
+                end_steps.append(step)
+                if log is not None:
+                    log.log(episode=episode, step=step, episode_return=ep_return, episode_length=ep_len,
+                            noise_sigma=noise_sigma())
+                bar.set_postfix(ret=f"{ep_return:.1f}", refresh=False)
+                obs, _ = env.reset(seed=episode_seed(seed, episode))
+                ep_len = 0
+                if noise is not None:
+                    noise.reset()
+                if param_noise is not None and len(buffer) >= config.batch_size:
+                    states = torch.as_tensor(buffer.sample(config.batch_size).obs)
+                    param_noise.adapt(action_distance(actor, behaviour, states))
+                    behaviour = param_noise.perturb(actor)
+            if step >= config.learning_starts:
+                b = buffer.sample(config.batch_size)
+                o, a, r = torch.as_tensor(b.obs), torch.as_tensor(b.actions), torch.as_tensor(b.rewards)
+                o2, term = torch.as_tensor(b.next_obs), torch.as_tensor(b.terminated)
+                y = critic_target(actor_t, critic_t, o2, r, term, config.gamma)
+                loss_q = critic_loss(critic, o, a, y)
+                critic_opt.zero_grad(set_to_none=True)
+                loss_q.backward()
+                critic_opt.step()
+                loss_pi = actor_loss(actor, critic, o)
+                actor_opt.zero_grad(set_to_none=True)
+                loss_pi.backward()
+                actor_opt.step()
+                soft_update(actor_t, actor, config.tau)
+                soft_update(critic_t, critic, config.tau)
+            if config.eval_every and step % config.eval_every == 0:
+                rets = evaluate_policy(DeterministicPolicy(actor), eval_env, config.eval_episodes, seed=seed + 10_000)
+                actor.train()
+                evals.append((step, float(rets.mean())))
+                if eval_log is not None:
+                    eval_log.log(step=step, mean_return=float(rets.mean()), std_return=float(rets.std()), episodes=len(rets))
+            if step % config.checkpoint_every == 0:
+                checkpoint()
+            bar.update(1)
+    except KeyboardInterrupt:
+        checkpoint()
+        raise
+    finally:
+        bar.close()
+        env.close()
+        eval_env.close()
+        for f in (log, eval_log):
+            if f is not None:
+                f.close()
+    checkpoint()
+    return Result(actor, critic, np.array(returns), np.array(end_steps, dtype=int),
+                  np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step)
+
+
+def make_config(algo: str, **overrides: Any) -> Config:
+    return Config(**overrides)
+
+
+def load_policy(ckpt: dict[str, Any]) -> DeterministicPolicy:
+    sp = ckpt["spaces"]
+    config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
+    actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
+    actor.load_state_dict(ckpt["actor"])
+    return DeterministicPolicy(actor)

@@ -1,0 +1,86 @@
+"""Exploration noise for deterministic policies (chapter 5).
+
+- :class:`GaussianNoise`: independent N(0, sigma^2) per action dimension, sigma multiplied by ``decay``
+  every step (the course report's ``explore-decay``).
+- :class:`OrnsteinUhlenbeckNoise`: temporally correlated noise, dx = theta (mu - x) dt + sigma sqrt(dt) N(0, 1)
+  (Lillicrap et al. 2016).
+- :class:`AdaptiveParamNoise`: perturb the actor's *weights* instead of its actions, with a scale adapted
+  so that the perturbed actor's actions stay about ``target_distance`` away from the unperturbed ones
+  (Plappert et al. 2018).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import torch
+
+
+class GaussianNoise:
+    """a + N(0, sigma^2), sigma <- sigma * decay after every sample."""
+
+    def __init__(self, size: int, sigma: float = 0.1, decay: float = 1.0, seed: int | None = None):
+        self.size, self.sigma, self.decay = size, sigma, decay
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self) -> np.ndarray:
+        x = self.rng.normal(0.0, self.sigma, self.size)
+        self.sigma *= self.decay
+        return x
+
+    def reset(self) -> None:
+        pass
+
+
+class OrnsteinUhlenbeckNoise:
+    """x_{t+1} = x_t + theta (mu - x_t) dt + sigma sqrt(dt) eps_t: mean-reverting, temporally correlated.
+
+    Its stationary distribution is N(mu, sigma^2 / (2 theta)) (for small dt).
+    """
+
+    def __init__(self, size: int, mu: float = 0.0, theta: float = 0.15, sigma: float = 0.2, dt: float = 1e-2,
+                 seed: int | None = None):
+        self.mu, self.theta, self.sigma, self.dt = mu, theta, sigma, dt
+        self.rng = np.random.default_rng(seed)
+        self.x = np.full(size, mu, dtype=float)
+
+    def __call__(self) -> np.ndarray:
+        self.x = self.x + self.theta * (self.mu - self.x) * self.dt + self.sigma * np.sqrt(self.dt) * self.rng.normal(size=self.x.shape)
+        return self.x.copy()
+
+    def reset(self) -> None:
+        self.x[:] = self.mu
+
+
+def action_distance(actor_a: torch.nn.Module, actor_b: torch.nn.Module, obs: torch.Tensor) -> float:
+    """d = sqrt(mean over states and action dimensions of (mu_a(s) - mu_b(s))^2)."""
+    with torch.no_grad():
+        return float(torch.sqrt(((actor_a(obs) - actor_b(obs)) ** 2).mean()).item())
+
+
+class AdaptiveParamNoise:
+    """A perturbed copy of the actor, theta~ = theta + N(0, sigma^2), with sigma adapted to a target distance.
+
+    ``adapt(distance)``: sigma <- sigma / alpha if the perturbed actions are farther than the target,
+    sigma * alpha otherwise.
+    """
+
+    def __init__(self, initial_sigma: float = 0.1, target_distance: float = 0.2, alpha: float = 1.01,
+                 seed: int | None = None):
+        self.sigma, self.target_distance, self.alpha = initial_sigma, target_distance, alpha
+        self.generator = torch.Generator().manual_seed(0 if seed is None else seed)
+        self.perturbed: torch.nn.Module | None = None
+
+    def perturb(self, actor: torch.nn.Module) -> torch.nn.Module:
+        """A fresh perturbed copy of ``actor`` (call at the start of each episode)."""
+        self.perturbed = copy.deepcopy(actor)
+        with torch.no_grad():
+            for p in self.perturbed.parameters():
+                p.add_(torch.randn(p.shape, generator=self.generator) * self.sigma)
+        return self.perturbed
+
+    def adapt(self, distance: float) -> float:
+        """Move sigma toward the target action distance; returns the new sigma."""
+        self.sigma = self.sigma / self.alpha if distance > self.target_distance else self.sigma * self.alpha
+        return self.sigma

@@ -1,0 +1,99 @@
+import numpy as np
+import pytest
+import torch
+
+from rlcore.ddpg import Actor, Config, Critic, actor_loss, critic_loss, critic_target, load_policy, train
+from rlcore.envs import make_env
+from rlcore.evaluate import evaluate_policy
+
+
+class ConstActor(torch.nn.Module):
+    def __init__(self, value):
+        super().__init__()
+        self.value = value
+
+    def forward(self, obs):
+        return torch.full((obs.shape[0], 1), self.value)
+
+
+class SumCritic(torch.nn.Module):
+    """Q(s, a) = s + a, for hand computations."""
+
+    def forward(self, obs, action):
+        return obs[:, 0] + action[:, 0]
+
+
+def test_critic_target_uses_the_target_networks_and_stops_at_terminal_states():
+    online_actor, target_actor = ConstActor(100.0), ConstActor(1.0)
+    next_obs = torch.tensor([[2.0], [2.0], [2.0]])
+    rewards = torch.tensor([1.0, 1.0, 1.0])
+    terminated = torch.tensor([0.0, 1.0, 0.0])  # the third transition was truncated, not terminated
+    y = critic_target(target_actor, SumCritic(), next_obs, rewards, terminated, gamma=0.5)
+    # Q'(s', mu'(s')) = 2 + 1 = 3 (the online actor's 100 is not used)
+    torch.testing.assert_close(y, torch.tensor([1 + 0.5 * 3, 1.0, 1 + 0.5 * 3]))
+    y_online = critic_target(online_actor, SumCritic(), next_obs, rewards, terminated, gamma=0.5)
+    assert y_online[0] == 1 + 0.5 * 102  # what a target computed with the online actor would be
+
+
+def test_losses_by_hand():
+    obs, act = torch.tensor([[1.0], [2.0]]), torch.tensor([[0.0], [1.0]])
+    assert critic_loss(SumCritic(), obs, act, torch.tensor([2.0, 3.0])).item() == pytest.approx((1 + 0) / 2)
+    assert actor_loss(ConstActor(0.5), SumCritic(), obs).item() == pytest.approx(-(1.5 + 2.5) / 2)
+
+
+def test_actor_gradient_flows_through_the_critic_only_into_the_actor():
+    torch.manual_seed(0)
+    actor, critic = Actor(3, 2, (8,), [-1, -1], [1, 1]), Critic(3, 2, (8,))
+    actor_loss(actor, critic, torch.randn(5, 3)).backward()
+    assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in actor.parameters())
+
+
+def test_actor_respects_the_action_box():
+    actor = Actor(2, 2, (8,), [-2.0, 0.0], [2.0, 1.0])
+    with torch.no_grad():
+        for p in actor.parameters():
+            p.fill_(10.0)
+    a = actor(torch.ones(4, 2))
+    assert torch.all(a[:, 0] <= 2.0) and torch.all(a[:, 1] <= 1.0) and torch.all(a[:, 1] >= 0.0)
+
+
+def test_discrete_actions_are_a_clear_error():
+    with pytest.raises(ValueError, match="continuous"):
+        train("CartPole-v1", steps=10)
+    with pytest.raises(ValueError, match="exploration"):
+        Config(exploration="epsilon")
+
+
+SMALL = dict(hidden=(64, 64), learning_starts=500, batch_size=64, buffer_size=10_000, eval_every=0)
+
+
+def test_short_run_on_pendulum_clearly_beats_random():
+    torch.set_num_threads(1)
+    result = train("Pendulum-v1", Config(**SMALL), steps=4_000, seed=0)
+    returns = evaluate_policy(load_policy({"spaces": {"obs_dim": 3, "act_dim": 1, "low": [-2.0], "high": [2.0]},
+                                           "config": vars(Config(**SMALL)), "actor": result.actor.state_dict()}),
+                              make_env("Pendulum-v1"), episodes=5, seed=3)
+    random = evaluate_policy(lambda o: np.random.default_rng(0).uniform(-2, 2, 1), make_env("Pendulum-v1"), 5, seed=3)
+    assert random.mean() < -900
+    assert returns.mean() > -600, returns
+
+
+@pytest.mark.parametrize("exploration", ["ou", "param", "none"])
+def test_every_exploration_runs_and_logs(exploration, tmp_path):
+    torch.set_num_threads(1)
+    train("Pendulum-v1", Config(exploration=exploration, **{**SMALL, "learning_starts": 100, "eval_every": 300}),
+          steps=600, seed=0, out=tmp_path)
+    from rlcore.logger import read_csv
+
+    prog = read_csv(tmp_path / "progress.csv")
+    assert len(prog["episode"]) == 3  # Pendulum episodes are 200 steps
+    if exploration == "param":
+        assert prog["noise_sigma"][-1] != pytest.approx(0.1)  # the scale adapted
+    assert read_csv(tmp_path / "eval.csv")["step"].tolist() == [300, 600]
+
+
+def test_reward_scale_does_not_change_the_logged_returns(tmp_path):
+    torch.set_num_threads(1)
+    a = train("Pendulum-v1", Config(**{**SMALL, "learning_starts": 400}), steps=400, seed=1)
+    b = train("Pendulum-v1", Config(reward_scale=10.0, **{**SMALL, "learning_starts": 400}), steps=400, seed=1)
+    np.testing.assert_allclose(a.episode_returns, b.episode_returns)  # random phase: same actions, raw returns
