@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 import torch.nn.functional as F
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
 from rlcore.checkpoint import load_checkpoint, save_checkpoint

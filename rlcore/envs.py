@@ -43,6 +43,11 @@ def check_env_id(env_id: str) -> None:
     )
 
 
+def is_mujoco(env_id: str) -> bool:
+    """True for a task simulated (and drawn) by MuJoCo."""
+    return "mujoco" in str(gym.spec(env_id).entry_point)
+
+
 def make_env(
     env_id: str,
     seed: int | None = None,
@@ -53,13 +58,13 @@ def make_env(
     """Make one Gymnasium environment, the way every chapter does.
 
     The id is checked first (a typo gets suggestions, not a registry traceback). Rendering to
-    ``rgb_array`` picks a headless OpenGL backend for MuJoCo. ``RecordEpisodeStatistics`` puts the
+    ``rgb_array`` picks a headless OpenGL backend for a MuJoCo task (other tasks draw without OpenGL). ``RecordEpisodeStatistics`` puts the
     episode's return and length into ``info["episode"]`` when it ends. The action and observation
     spaces are seeded with ``seed``; seed the first ``reset`` with the same number:
     ``obs, info = env.reset(seed=seed)``.
     """
     check_env_id(env_id)
-    if render_mode == "rgb_array":
+    if render_mode == "rgb_array" and is_mujoco(env_id):
         from rlcore.render import select_gl_backend
 
         select_gl_backend()

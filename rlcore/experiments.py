@@ -145,7 +145,7 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, w
 def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
                    results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
     """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time."""
-    from tqdm.auto import tqdm
+    from tqdm import tqdm
 
     exp = get_experiment(name)
     tasks = [(spec, s) for spec in exp.runs if not only or spec.name in only

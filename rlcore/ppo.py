@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_checkpoint, save_checkpoint

@@ -126,15 +126,16 @@ def rollout_frames(
     """
     if frame_skip < 1:
         raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
-    import gymnasium as gym
+    from rlcore.envs import check_env_id, is_mujoco, make_env
 
-    from rlcore.envs import make_env
-
+    check_env_id(env_id)
     kwargs = dict(env_kwargs or {})
-    spec = gym.spec(env_id) if env_id in gym.envs.registry else None
-    if spec is not None and "mujoco" in str(spec.entry_point):
+    if is_mujoco(env_id):
         kwargs.setdefault("width", width)
         kwargs.setdefault("height", height)
+    else:
+        # pygame draws the grid worlds and classic-control tasks; without a screen it needs no video device
+        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     env = make_env(env_id, seed=seed, render_mode="rgb_array", **kwargs)
     try:
         obs, _ = env.reset(seed=seed)

@@ -18,7 +18,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from rlcore.checkpoint import load_checkpoint, save_checkpoint
 from rlcore.envs import make_env
@@ -117,6 +117,54 @@ class TabularPolicy:
         return int(self.Q[int(obs)].argmax())
 
 
+# --- planning with a known model: the yardstick for what Q-learning learns ---------------------
+
+
+def transition_model(env_id: str, **env_kwargs: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Expected rewards ``R[s, a]`` and probabilities ``M[s, a, s']`` of non-terminal next states.
+
+    Read from ``env.unwrapped.P``, the dynamics Gymnasium's toy-text tasks expose as lists of
+    ``(probability, next_state, reward, terminated)``. A terminal next state contributes no future,
+    so it gets no column in ``M``.
+    """
+    env = gym.make(env_id, **env_kwargs)
+    P = getattr(env.unwrapped, "P", None)
+    env.close()
+    if P is None:
+        raise ValueError(f"{env_id} does not expose its dynamics as env.unwrapped.P")
+    n_states, n_actions = len(P), len(P[0])
+    R = np.zeros((n_states, n_actions))
+    M = np.zeros((n_states, n_actions, n_states))
+    for s in range(n_states):
+        for a in range(n_actions):
+            for prob, s_next, reward, terminated in P[s][a]:
+                R[s, a] += prob * reward
+                if not terminated:
+                    M[s, a, s_next] += prob
+    return R, M
+
+
+def value_iteration(R: np.ndarray, M: np.ndarray, gamma: float, sweeps: int) -> np.ndarray:
+    """Q after ``sweeps`` Bellman optimality backups from Q = 0: Q <- R + gamma * M max_a' Q.
+
+    With gamma = 1, ``sweeps = H`` gives the best expected return within H steps.
+    """
+    Q = np.zeros_like(R)
+    for _ in range(sweeps):
+        Q = R + gamma * M @ Q.max(axis=1)
+    return Q
+
+
+def best_return(env_id: str, horizon: int, **env_kwargs: Any) -> float:
+    """The best expected undiscounted return within ``horizon`` steps, from the start distribution."""
+    R, M = transition_model(env_id, **env_kwargs)
+    V = value_iteration(R, M, 1.0, horizon).max(axis=1)
+    env = gym.make(env_id, **env_kwargs)
+    start = np.asarray(env.unwrapped.initial_state_distrib)
+    env.close()
+    return float(start @ V)
+
+
 # --- training -----------------------------------------------------------------------------------
 
 
@@ -126,7 +174,7 @@ def check_spaces(env: gym.Env, env_id: str) -> tuple[int, int]:
     if not isinstance(obs, gym.spaces.Discrete) or not isinstance(act, gym.spaces.Discrete):
         raise ValueError(
             f"Tabular methods need discrete states and actions, but {env_id} has observation space "
-            f"{obs} and action space {act}. Try FrozenLake-v1, CliffWalking-v1 or Taxi-v3, or a deep "
+            f"{obs} and action space {act}. Try FrozenLake-v1, CliffWalking-v1 or Taxi-v4, or a deep "
             "method (dqn for discrete actions, ddpg/ppo for continuous ones)."
         )
     return int(obs.n), int(act.n)

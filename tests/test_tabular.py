@@ -134,3 +134,32 @@ def test_bad_config():
         Config(method="expected-sarsa")
     with pytest.raises(ValueError, match="alpha"):
         Config(alpha=0.0)
+
+
+def test_value_iteration_on_deterministic_frozenlake_by_hand():
+    from rlcore.tabular import best_return, transition_model, value_iteration
+
+    R, M = transition_model("FrozenLake-v1", is_slippery=False)
+    assert R.shape == (16, 4) and M.shape == (16, 4, 16)
+    assert R[14, 2] == 1.0 and M[14, 2].sum() == 0.0  # RIGHT from 14 reaches the goal and ends
+    Q = value_iteration(R, M, gamma=0.9, sweeps=50)
+    # the shortest path is 6 steps, rewarded only at the end: V(start) = 0.9^5
+    assert Q[0].max() == pytest.approx(0.9**5)
+    assert best_return("FrozenLake-v1", 5, is_slippery=False) == 0.0   # 5 steps are not enough
+    assert best_return("FrozenLake-v1", 6, is_slippery=False) == 1.0
+    assert best_return("CliffWalking-v1", 100) == -13.0
+
+
+def test_learned_table_agrees_with_value_iteration_on_the_greedy_path():
+    from rlcore.tabular import transition_model, value_iteration
+
+    R, M = transition_model("CliffWalking-v1")
+    Q_star = value_iteration(R, M, gamma=1.0, sweeps=200)
+    learned = train("CliffWalking-v1", Config(method="q-learning", **CLIFF), steps=20_000, seed=0).Q
+    env = make_env("CliffWalking-v1")
+    s, _ = env.reset(seed=0)
+    for _ in range(13):
+        a = int(greedy_policy(learned)[s])
+        assert Q_star[s, a] == Q_star[s].max()  # every greedy step is an optimal action
+        s, _, done, _, _ = env.step(a)
+    assert done
