@@ -38,6 +38,9 @@ ctx.free()
 
 _selected: str | None = None
 
+# A camera that follows the humanoid's torso from the side (passed as default_camera_config).
+HUMANOID_CAMERA = {"trackbodyid": 1, "distance": 4.0, "elevation": -15.0, "lookat": np.array([0.0, 0.0, 1.0])}
+
 
 class HeadlessGLError(RuntimeError):
     """No headless OpenGL backend works, so MuJoCo cannot render offscreen."""
@@ -133,6 +136,8 @@ def rollout_frames(
     if is_mujoco(env_id):
         kwargs.setdefault("width", width)
         kwargs.setdefault("height", height)
+        if env_id.startswith("Humanoid"):  # Gymnasium's default camera aims above the humanoid's head
+            kwargs.setdefault("default_camera_config", dict(HUMANOID_CAMERA))
     else:
         # pygame draws the grid worlds and classic-control tasks; without a screen it needs no video device
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
@@ -154,15 +159,29 @@ def rollout_frames(
         env.close()
 
 
-def frames_to_gif(frames: Sequence[np.ndarray], fps: int = 30) -> bytes:
-    """Encode RGB frames as an endlessly looping GIF and return its bytes."""
-    import imageio.v3 as iio
+def frames_to_gif(frames: Sequence[np.ndarray], fps: int = 30, palette_samples: int = 8) -> bytes:
+    """Encode RGB frames as an endlessly looping GIF and return its bytes.
+
+    One 256-colour palette is built for the whole clip from ``palette_samples`` frames spread over it
+    (median cut, no dithering), and every frame is mapped to it. A shared palette without dithering
+    noise is what keeps a few hundred 320x240 MuJoCo frames near 1 MB instead of several.
+    Consecutive identical frames are merged into one longer frame.
+    """
+    from PIL import Image
 
     if len(frames) == 0:
         raise ValueError("frames_to_gif needs at least one frame")
-    stack = np.stack([np.asarray(f, dtype=np.uint8) for f in frames])
+    images = [Image.fromarray(np.asarray(f, dtype=np.uint8)[..., :3]) for f in frames]
+    picks = np.unique(np.linspace(0, len(images) - 1, min(palette_samples, len(images))).astype(int))
+    w, h = images[0].size
+    sheet = Image.new("RGB", (w, h * len(picks)))
+    for k, i in enumerate(picks):
+        sheet.paste(images[i], (0, h * k))
+    palette = sheet.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+    quantized = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
     buf = io.BytesIO()
-    iio.imwrite(buf, stack, extension=".gif", duration=1000 / fps, loop=0)
+    quantized[0].save(buf, format="GIF", save_all=True, append_images=quantized[1:],
+                      duration=round(1000 / fps), loop=0, optimize=False)
     return buf.getvalue()
 
 
