@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import signal
 import sys
 import typing
 from pathlib import Path
@@ -187,6 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     from rlcore.render import HeadlessGLError
 
     args = build_parser().parse_args(argv)
+    # A `kill` (SIGTERM, e.g. from a job scheduler) ends a run like Ctrl-C does: checkpoint first.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         return args.func(args)
     except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:

@@ -102,10 +102,19 @@ def versions() -> dict[str, str]:
     return out
 
 
+def command_line() -> str | None:
+    """How this process was started, as a user would type it (``python -m rlcore ...`` for the CLI)."""
+    if not sys.argv or not sys.argv[0]:
+        return None
+    prog = Path(sys.argv[0])
+    head = ["python", "-m", "rlcore"] if prog.name == "__main__.py" and prog.parent.name == "rlcore" else [prog.name]
+    return shlex.join([*head, *sys.argv[1:]])
+
+
 def run_metadata(**extra: Any) -> dict[str, Any]:
     """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``."""
     return {
-        "command": shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else None,
+        "command": command_line(),
         "versions": versions(),
         "commit": git_commit(),
         "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count()},

@@ -30,7 +30,7 @@ def test_train_writes_the_run_folder(frozenlake_run):
     for name in ("config.json", "meta.json", "progress.csv", "checkpoint.pt"):
         assert (frozenlake_run / name).is_file()
     meta = json.loads((frozenlake_run / "meta.json").read_text())
-    assert "train q-learning" in meta["command"] and meta["versions"]["gymnasium"]
+    assert meta["command"].startswith("python -m rlcore train q-learning") and meta["versions"]["gymnasium"]
     config = json.loads((frozenlake_run / "config.json").read_text())
     assert config["config"]["env_kwargs"] == {"is_slippery": False} and config["seed"] == 0
 
@@ -88,7 +88,8 @@ def test_corrupt_checkpoint_is_a_clear_error(frozenlake_run, tmp_path):
     assert proc.returncode == 2 and "No checkpoint" in proc.stderr
 
 
-def test_ctrl_c_leaves_a_usable_checkpoint_and_resumes(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_interrupt_leaves_a_usable_checkpoint_and_resumes(tmp_path, sig):
     out = tmp_path / "long"
     cmd = [sys.executable, "-m", "rlcore", "train", "q-learning", "--env", "Taxi-v4", "--steps", "50000000",
            "--out", str(out), "--no-progress", "--set", "checkpoint_every=100000000"]
@@ -97,7 +98,7 @@ def test_ctrl_c_leaves_a_usable_checkpoint_and_resumes(tmp_path):
     while time.time() < deadline and not (out / "progress.csv").exists():
         time.sleep(0.2)
     time.sleep(1.0)  # train a little
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     assert "Checkpoint saved" in err

@@ -156,3 +156,19 @@ def test_resume_keeps_replay_memory_and_network(tmp_path):
     replay = load_checkpoint(tmp_path / "checkpoint.pt")["replay"]
     assert len(replay["rewards"]) == 1_500
     np.testing.assert_array_equal(replay["obs"][:800].numpy(), ckpt["replay"]["obs"].numpy())
+
+
+def test_update_fits_a_batch_of_different_targets():
+    """With several transitions per batch, each Q(s_i, a_i) must move toward its own target y_i
+    (a broadcasting slip, e.g. a (B, 1) - (B,) subtraction, would fit the mean instead)."""
+    torch.manual_seed(0)
+    q, q_target = QNetwork(3, 2, (32,)), QNetwork(3, 2, (32,))
+    opt = torch.optim.Adam(q.parameters(), lr=1e-2)
+    obs = np.eye(3, dtype=np.float32)
+    batch = Batch(obs, np.array([0, 1, 0]), np.array([1.0, -2.0, 5.0], dtype=np.float32), obs.copy(),
+                  np.ones(3, dtype=np.float32), np.arange(3), np.ones(3, dtype=np.float32))
+    for _ in range(500):
+        update(q, q_target, opt, batch, Config(huber=False))
+    with torch.no_grad():
+        fitted = q(torch.as_tensor(obs)).gather(1, torch.tensor([[0], [1], [0]])).squeeze(1)
+    torch.testing.assert_close(fitted, torch.tensor([1.0, -2.0, 5.0]), atol=1e-2, rtol=0)
