@@ -18,9 +18,12 @@ that the chapter can say so and fall back to a short live run.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import multiprocessing
 import os
 import shutil
+import tempfile
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -142,22 +145,20 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, w
     return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
 
 
-def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
-                   results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
-    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time."""
+def _train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: Path, work: Path,
+               progress: bool = True) -> list[str]:
     from tqdm import tqdm
 
-    exp = get_experiment(name)
-    tasks = [(spec, s) for spec in exp.runs if not only or spec.name in only
-             for s in spec.seeds if seeds is None or s in seeds]
     lines: list[str] = []
-    with tqdm(total=len(tasks), desc=name, unit="run") as bar:
+    with tqdm(total=len(tasks), desc=name, unit="run", disable=not progress) as bar:
         if jobs <= 1:
             for spec, s in tasks:
                 lines.append(train_one(name, spec, s, results, work))
                 bar.update(1)
         else:
-            with ProcessPoolExecutor(max_workers=jobs) as pool:
+            # spawn, not fork: safe from a Jupyter kernel, whose threads a fork would copy half-way
+            ctx = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
                 futures = [pool.submit(train_one, name, spec, s, results, work) for spec, s in tasks]
                 for fut in as_completed(futures):
                     lines.append(fut.result())
@@ -165,44 +166,140 @@ def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seed
     return lines
 
 
+def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
+                   results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
+    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time."""
+    exp = get_experiment(name)
+    tasks = [(spec, s) for spec in exp.runs if not only or spec.name in only
+             for s in spec.seeds if seeds is None or s in seeds]
+    return _train_all(name, tasks, jobs, results, work)
+
+
 @dataclass
 class SeedResult:
+    """One finished seed: its logs, its config and metadata, and (loaded on first use) its policy."""
+
     seed: int
     folder: Path
     progress: dict[str, np.ndarray]
     evals: dict[str, np.ndarray]
     config: dict[str, Any]
     meta: dict[str, Any]
+    _policy: Any = field(default=None, repr=False)
+
+    @property
+    def episode_end_steps(self) -> np.ndarray:
+        return self.progress["step"]
+
+    @property
+    def episode_returns(self) -> np.ndarray:
+        """Training episodes' returns (of the exploring behaviour policy)."""
+        return self.progress["episode_return"]
+
+    @property
+    def policy(self):
+        """The final deterministic policy, from ``policy.pt``."""
+        if self._policy is None:
+            from rlcore.algos import get_algorithm
+            from rlcore.checkpoint import load_checkpoint
+
+            ckpt = load_checkpoint(self.folder / "policy.pt")
+            self._policy = get_algorithm(ckpt["algo"]).load_policy(ckpt)
+        return self._policy
 
 
 @dataclass
 class RunResults:
+    """The seeds of one configuration: from ``results/``, or from a short live stand-in (``source="live"``)."""
+
     spec: RunSpec
     seeds: list[SeedResult]
     missing: list[int]
+    source: str = "results"
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
 
     @property
     def label(self) -> str:
         return self.spec.label or self.spec.name
 
+    @property
+    def steps(self) -> int:
+        """Training steps per seed of what is shown (the live budget for a live stand-in)."""
+        return self.spec.steps
+
+
+def _read_run(name: str, spec: RunSpec, results: Path) -> RunResults:
+    found, missing = [], []
+    for s in spec.seeds:
+        _, folder = run_paths(name, spec.name, s, results)
+        if not (folder / "policy.pt").exists():
+            missing.append(s)
+            continue
+        found.append(SeedResult(
+            s, folder, read_csv(folder / "progress.csv"),
+            read_csv(folder / "eval.csv") if (folder / "eval.csv").exists() else {},
+            json.loads((folder / "config.json").read_text()), json.loads((folder / "meta.json").read_text()),
+        ))
+    return RunResults(spec, found, missing)
+
 
 def load_experiment(name: str, results: Path = RESULTS_DIR) -> dict[str, RunResults]:
     """Everything ``results/`` holds for an experiment, with the seeds still missing listed per run."""
-    out: dict[str, RunResults] = {}
-    for spec in get_experiment(name).runs:
-        found, missing = [], []
-        for s in spec.seeds:
-            _, folder = run_paths(name, spec.name, s, results)
-            if not (folder / "policy.pt").exists():
-                missing.append(s)
-                continue
-            found.append(SeedResult(
-                s, folder, read_csv(folder / "progress.csv"),
-                read_csv(folder / "eval.csv") if (folder / "eval.csv").exists() else {},
-                json.loads((folder / "config.json").read_text()), json.loads((folder / "meta.json").read_text()),
-            ))
-        out[spec.name] = RunResults(spec, found, missing)
-    return out
+    return {spec.name: _read_run(name, spec, results) for spec in get_experiment(name).runs}
+
+
+def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list[int], jobs: int = 2,
+                  eval_points: int = 10, results: Path = RESULTS_DIR) -> RunResults:
+    """Run ``run`` of experiment ``name`` from ``results/``; if it has no seed there, a short live stand-in.
+
+    The stand-in has the same settings with ``fallback_steps`` steps per seed (evaluated ``eval_points``
+    times), trains ``fallback_seeds`` in ``jobs`` processes into a temporary folder, and is returned
+    with ``source="live"`` so that a page can say what it shows.
+    """
+    found = _read_run(name, next(r for r in get_experiment(name).runs if r.name == run), results)
+    if found.seeds:
+        return found
+    from rlcore.algos import get_algorithm
+
+    spec = found.spec
+    overrides = dict(spec.overrides)
+    if "eval_every" in get_algorithm(spec.algo).Config.__dataclass_fields__:
+        overrides["eval_every"] = max(fallback_steps // eval_points, 1)
+    live = dataclasses.replace(spec, steps=fallback_steps, seeds=tuple(fallback_seeds), overrides=overrides)
+    tmp = Path(tempfile.mkdtemp(prefix=f"rlcore-live-{name}-"))
+    _train_all(name, [(live, s) for s in live.seeds], jobs, tmp / "results", tmp / "runs", progress=False)
+    out = _read_run(name, live, tmp / "results")
+    return RunResults(live, out.seeds, list(spec.seeds), source="live")
+
+
+def provenance_markdown(name: str, run: RunResults, command: str | None = None) -> str:
+    """A line to print under a figure: which seeds, how many steps, made by which command, commit, versions.
+
+    A live stand-in, or seeds still missing from ``results/``, get a visible warning.
+    """
+    command = command or f"python -m rlcore experiments run {name} --jobs 2"
+    full = next(r for r in get_experiment(name).runs if r.name == run.name)
+    folder = f"results/{name}/{run.name}/"
+    seeds = [s.seed for s in run.seeds]
+    if run.source == "live":
+        return (f":::{{warning}}\n**{run.label}**: `{folder}` holds none of its seeds {run.missing}, so this "
+                f"page trained a short live run instead: seed(s) {seeds}, {run.steps:,} steps each (the full "
+                f"budget is {full.steps:,}). Run `{command}` to fill in `results/`.\n:::\n")
+    commits = sorted({s.meta.get("commit") or "unknown" for s in run.seeds})
+    commits_text = ", ".join(c[:7] + (" (with uncommitted changes)" if c.endswith("+dirty") else "") for c in commits)
+    meta = run.seeds[0].meta if run.seeds else {}
+    v = meta.get("versions", {})
+    text = (f"*{run.label}*: `{folder}`, seeds {seeds} ({len(seeds)} of {len(full.seeds)}), {run.steps:,} steps "
+            f"each; made by `{command}` at commit {commits_text}; Gymnasium {v.get('gymnasium')}, PyTorch "
+            f"{v.get('torch')}, NumPy {v.get('numpy')}, Python {v.get('python')}, "
+            f"{meta.get('machine', {}).get('cpus', '?')} CPUs.")
+    if run.missing:
+        text += (f"\n\n:::{{warning}}\nSeeds {run.missing} of *{run.label}* are not in `{folder}` yet; this page "
+                 f"shows the {len(seeds)} that are. Run `{command}` to finish them.\n:::")
+    return text + "\n"
 
 
 def status_lines(name: str, results: Path = RESULTS_DIR) -> list[str]:

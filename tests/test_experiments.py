@@ -1,5 +1,7 @@
 import json
 
+import numpy as np
+
 import pytest
 
 from rlcore import experiments as ex
@@ -60,3 +62,23 @@ def test_first_step_reaching_and_tables():
     md = ex.markdown_table(rows, {"seed": "seed", "first_step_reaching": "first step ≥ 475"})
     assert md.splitlines() == ["| seed | first step ≥ 475 |", "|---|---|", "| 0 | 20 |"]
     assert "—" in ex.markdown_table([{"a": None}])
+
+
+def test_load_or_train_falls_back_to_a_live_run_and_says_so(tiny, tmp_path):
+    results = tmp_path / "results"
+    live = ex.load_or_train("tiny", "dqn", fallback_steps=400, fallback_seeds=[5], jobs=1, eval_points=2,
+                            results=results)
+    assert live.source == "live" and live.steps == 400 and live.missing == [0]
+    assert [s.seed for s in live.seeds] == [5]
+    assert live.seeds[0].evals["step"].tolist() == [200, 400]
+    assert live.seeds[0].policy(np.zeros(4)) in (0, 1)  # the policy loads from the live run's policy.pt
+    text = ex.provenance_markdown("tiny", live)
+    assert "{warning}" in text and "short live run" in text and "400 steps" in text
+    # once results/ has the run, it is used as is
+    ex.run_experiment("tiny", only=["dqn"], results=results, work=tmp_path / "runs")
+    stored = ex.load_or_train("tiny", "dqn", fallback_steps=400, fallback_seeds=[5], results=results)
+    assert stored.source == "results" and [s.seed for s in stored.seeds] == [0] and stored.steps == 600
+    text = ex.provenance_markdown("tiny", stored)
+    assert "seeds [0] (1 of 1), 600 steps" in text and "python -m rlcore experiments run tiny" in text
+    assert "{warning}" not in text
+    assert len(stored.seeds[0].episode_returns) == len(stored.seeds[0].episode_end_steps) > 0
