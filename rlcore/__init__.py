@@ -9,7 +9,15 @@ One idea per module (see the design card in the README):
 - :mod:`rlcore.checkpoint` atomic save, ``weights_only=True`` load
 - :mod:`rlcore.plots`      learning curves with a band over seeds
 - :mod:`rlcore.runs`       the output directory of one training run
-- :mod:`rlcore.tabular`    tabular Q-learning and SARSA
+- :mod:`rlcore.profile`    the quick/book budget switch the chapters read
+- :mod:`rlcore.nets`       ``mlp()`` and the Q-network, dueling, actor and critic heads
+- :mod:`rlcore.buffers`    replay buffer, sum tree, prioritized replay, GAE
+- :mod:`rlcore.noise`      Gaussian, Ornstein-Uhlenbeck and adaptive parameter noise
+- :mod:`rlcore.tabular`    tabular Q-learning and SARSA, value iteration
+- :mod:`rlcore.dqn`        DQN with Double, Dueling and Prioritized switches
+- :mod:`rlcore.ddpg`       DDPG
+- :mod:`rlcore.ppo`        PPO, clipped and adaptive-KL
+- :mod:`rlcore.experiments` the book's named, resumable full-budget experiments
 - :mod:`rlcore.algos`      the registry of algorithms the command line knows
 
 Modules are imported on demand (``import rlcore.envs``) so that ``import rlcore`` stays cheap.
