@@ -25,14 +25,14 @@ from torch import nn
 from tqdm import tqdm
 
 from rlcore.buffers import ReplayBuffer
-from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.checkpoint import save_checkpoint
 from rlcore.dqn import soft_update
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.nets import mlp
 from rlcore.noise import AdaptiveParamNoise, GaussianNoise, OrnsteinUhlenbeckNoise, action_distance
-from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_json
+from rlcore.runs import config_dict, episode_seed, open_run
 
 POLICY_KEYS = ("actor", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -192,29 +192,21 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     end_steps: list[int] = []
     evals: list[tuple[int, float]] = []
 
-    run = RunDir(out) if out is not None else None
+    run, ckpt = open_run(out, "ddpg", env_id, seed, steps, config)
+    if ckpt is not None:
+        for mod, key in ((actor, "actor"), (critic, "critic"), (actor_t, "actor_target"), (critic_t, "critic_target"),
+                         (actor_opt, "actor_opt"), (critic_opt, "critic_opt")):
+            mod.load_state_dict(ckpt[key])
+        if "replay" in ckpt:
+            buffer.load_state_dict(ckpt["replay"])
+        step, episode = int(ckpt["step"]), int(ckpt["episode"])
+        rng.bit_generator.state = ckpt["rng"]
+        torch.set_rng_state(ckpt["torch_rng"])
+        for src in (noise, param_noise):  # the scale the noise had decayed or adapted to
+            if src is not None and hasattr(src, "sigma"):
+                src.sigma = float(ckpt["noise_sigma"])
     log = eval_log = None
     if run is not None:
-        if run.checkpoint.exists():
-            ckpt = load_checkpoint(run.checkpoint)
-            if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != ("ddpg", env_id, seed):
-                raise ValueError(f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} "
-                                 f"(seed {ckpt.get('seed')}); choose another --out folder or delete it.")
-            for mod, key in ((actor, "actor"), (critic, "critic"), (actor_t, "actor_target"), (critic_t, "critic_target"),
-                             (actor_opt, "actor_opt"), (critic_opt, "critic_opt")):
-                mod.load_state_dict(ckpt[key])
-            if "replay" in ckpt:
-                buffer.load_state_dict({k: (v.numpy() if isinstance(v, torch.Tensor) else v) for k, v in ckpt["replay"].items()})
-            step, episode = int(ckpt["step"]), int(ckpt["episode"])
-            rng.bit_generator.state = ckpt["rng"]
-            torch.set_rng_state(ckpt["torch_rng"])
-            if noise is not None and hasattr(noise, "sigma") and "noise_sigma" in ckpt:
-                noise.sigma = float(ckpt["noise_sigma"])
-            if param_noise is not None and "noise_sigma" in ckpt:
-                param_noise.sigma = float(ckpt["noise_sigma"])
-        else:
-            write_json(run.config, {"algo": "ddpg", "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
-            write_json(run.meta, run_metadata(algo="ddpg", env_id=env_id, seed=seed, steps=steps))
         log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "noise_sigma"])
         eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
 

@@ -30,12 +30,12 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
-from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.checkpoint import save_checkpoint
 from rlcore.envs import make_env
 from rlcore.evaluate import discounted_return, episode_rewards
 from rlcore.logger import CSVLogger
 from rlcore.nets import DuelingQNetwork, QNetwork
-from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_json
+from rlcore.runs import config_dict, episode_seed, open_run
 from rlcore.tabular import linear_schedule
 
 
@@ -274,27 +274,18 @@ def train(
     end_steps: list[int] = []
     evals: list[dict[str, float]] = []
 
-    run = RunDir(out) if out is not None else None
+    run, ckpt = open_run(out, "dqn", env_id, seed, steps, config, variant=config.variant)
+    if ckpt is not None:
+        q.load_state_dict(ckpt["q"])
+        q_target.load_state_dict(ckpt["q_target"])
+        optimizer.load_state_dict(ckpt["optimizer"])
+        if "replay" in ckpt:
+            buffer.load_state_dict(ckpt["replay"])
+        step, episode = int(ckpt["step"]), int(ckpt["episode"])
+        rng.bit_generator.state = ckpt["rng"]
+        torch.set_rng_state(ckpt["torch_rng"])
     log = eval_log = None
     if run is not None:
-        if run.checkpoint.exists():
-            ckpt = load_checkpoint(run.checkpoint)
-            if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != ("dqn", env_id, seed):
-                raise ValueError(f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} "
-                                 f"(seed {ckpt.get('seed')}); choose another --out folder or delete it.")
-            q.load_state_dict(ckpt["q"])
-            q_target.load_state_dict(ckpt["q_target"])
-            optimizer.load_state_dict(ckpt["optimizer"])
-            if "replay" in ckpt:
-                buffer.load_state_dict({k: (v.numpy() if isinstance(v, torch.Tensor) else v)
-                                        for k, v in ckpt["replay"].items()})
-            step, episode = int(ckpt["step"]), int(ckpt["episode"])
-            rng.bit_generator.state = ckpt["rng"]
-            torch.set_rng_state(ckpt["torch_rng"])
-        else:
-            write_json(run.config, {"algo": "dqn", "env_id": env_id, "seed": seed, "steps": steps,
-                                    "config": config_dict(config)})
-            write_json(run.meta, run_metadata(algo="dqn", variant=config.variant, env_id=env_id, seed=seed, steps=steps))
         log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "epsilon"])
         eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes", "q_start",
                                                      "discounted_return_start"])

@@ -33,12 +33,12 @@ from torch import nn
 from tqdm import tqdm
 
 from rlcore.buffers import gae
-from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.checkpoint import save_checkpoint
 from rlcore.envs import make_env, make_vec_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.nets import mlp
-from rlcore.runs import RunDir, config_dict, run_metadata, write_json
+from rlcore.runs import config_dict, open_run
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -284,28 +284,22 @@ def train(
         var = obs_norm.obs_rms.var.copy() if obs_norm else None
         return PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
 
-    run = RunDir(out) if out is not None else None
+    run, ckpt = open_run(out, "ppo", env_id, seed, steps, config)
+    if ckpt is not None:
+        agent.load_state_dict(ckpt["agent"])
+        optimizer.load_state_dict(ckpt["optimizer"])
+        step, iteration, kl_coef = int(ckpt["step"]), int(ckpt["iteration"]), float(ckpt["kl_coef"])
+        rng.bit_generator.state = ckpt["rng"]
+        torch.set_rng_state(ckpt["torch_rng"])
+        if obs_norm is not None:
+            obs_norm.obs_rms.mean, obs_norm.obs_rms.var = np.asarray(ckpt["obs_mean"]), np.asarray(ckpt["obs_var"])
+            obs_norm.obs_rms.count = float(ckpt["obs_count"])
+        if rew_norm is not None:
+            # the return statistics are scalars, stored as plain floats
+            rew_norm.return_rms.mean, rew_norm.return_rms.var = np.asarray(ckpt["ret_mean"]), np.asarray(ckpt["ret_var"])
+            rew_norm.return_rms.count = float(ckpt["ret_count"])
     log = eval_log = None
     if run is not None:
-        if run.checkpoint.exists():
-            ckpt = load_checkpoint(run.checkpoint)
-            if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != ("ppo", env_id, seed):
-                raise ValueError(f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} "
-                                 f"(seed {ckpt.get('seed')}); choose another --out folder or delete it.")
-            agent.load_state_dict(ckpt["agent"])
-            optimizer.load_state_dict(ckpt["optimizer"])
-            step, iteration, kl_coef = int(ckpt["step"]), int(ckpt["iteration"]), float(ckpt["kl_coef"])
-            rng.bit_generator.state = ckpt["rng"]
-            torch.set_rng_state(ckpt["torch_rng"])
-            if obs_norm is not None:
-                obs_norm.obs_rms.mean, obs_norm.obs_rms.var = ckpt["obs_mean"].numpy(), ckpt["obs_var"].numpy()
-                obs_norm.obs_rms.count = float(ckpt["obs_count"])
-            if rew_norm is not None:
-                rew_norm.return_rms.mean, rew_norm.return_rms.var = ckpt["ret_mean"].numpy(), ckpt["ret_var"].numpy()
-                rew_norm.return_rms.count = float(ckpt["ret_count"])
-        else:
-            write_json(run.config, {"algo": "ppo", "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
-            write_json(run.meta, run_metadata(algo="ppo", env_id=env_id, seed=seed, steps=steps))
         log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length"])
         eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
         upd_log = CSVLogger(run.root / "updates.csv", ["iteration", "step", "policy_loss", "value_loss", "entropy",

@@ -123,6 +123,32 @@ def run_metadata(**extra: Any) -> dict[str, Any]:
     }
 
 
+def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, steps: int, config: Any,
+             **meta: Any) -> tuple[RunDir | None, dict[str, Any] | None]:
+    """Open a run's output folder: ``(run folder, checkpoint to resume from or None)``.
+
+    No ``out``: ``(None, None)``. A folder with a checkpoint of the same algorithm, environment and seed
+    is resumed; one of another run is an error. A new folder gets ``config.json`` and ``meta.json``
+    (``meta`` adds fields to the latter).
+    """
+    if out is None:
+        return None, None
+    from rlcore.checkpoint import load_checkpoint
+
+    run = RunDir(out)
+    if run.checkpoint.exists():
+        ckpt = load_checkpoint(run.checkpoint)
+        if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != (algo, env_id, seed):
+            raise ValueError(
+                f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} (seed {ckpt.get('seed')}); "
+                "choose another --out folder or delete it."
+            )
+        return run, ckpt
+    write_json(run.config, {"algo": algo, "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
+    write_json(run.meta, run_metadata(algo=algo, env_id=env_id, seed=seed, steps=steps, **meta))
+    return run, None
+
+
 def config_dict(config: Any) -> dict[str, Any]:
     """A dataclass Config as a JSON-ready dict."""
     return dataclasses.asdict(config)

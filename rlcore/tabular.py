@@ -20,10 +20,10 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.checkpoint import save_checkpoint
 from rlcore.envs import make_env
 from rlcore.logger import CSVLogger
-from rlcore.runs import RunDir, config_dict, episode_seed, run_metadata, write_json
+from rlcore.runs import config_dict, episode_seed, open_run
 
 METHODS = ("q-learning", "sarsa")
 POLICY_KEYS = ("q",)
@@ -224,23 +224,13 @@ def train(
     returns: list[float] = []
     lengths: list[int] = []
     end_steps: list[int] = []
-    run = RunDir(out) if out is not None else None
+    run, ckpt = open_run(out, config.method, env_id, seed, steps, config)
+    if ckpt is not None:
+        Q = ckpt["q"].numpy().copy()
+        step, episode = int(ckpt["step"]), int(ckpt["episode"])
+        rng.bit_generator.state = ckpt["rng"]
     log = None
     if run is not None:
-        if run.checkpoint.exists():
-            ckpt = load_checkpoint(run.checkpoint)
-            if (ckpt.get("algo"), ckpt.get("env_id"), ckpt.get("seed")) != (config.method, env_id, seed):
-                raise ValueError(
-                    f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} (seed {ckpt.get('seed')}); "
-                    "choose another --out folder or delete it."
-                )
-            Q = ckpt["q"].numpy().copy()
-            step, episode = int(ckpt["step"]), int(ckpt["episode"])
-            rng.bit_generator.state = ckpt["rng"]
-        else:
-            write_json(run.config, {"algo": config.method, "env_id": env_id, "seed": seed,
-                                    "steps": steps, "config": config_dict(config)})
-            write_json(run.meta, run_metadata(algo=config.method, env_id=env_id, seed=seed, steps=steps))
         log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "epsilon"])
 
     def checkpoint() -> None:

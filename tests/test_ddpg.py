@@ -97,3 +97,17 @@ def test_reward_scale_does_not_change_the_logged_returns(tmp_path):
     a = train("Pendulum-v1", Config(**{**SMALL, "learning_starts": 400}), steps=400, seed=1)
     b = train("Pendulum-v1", Config(reward_scale=10.0, **{**SMALL, "learning_starts": 400}), steps=400, seed=1)
     np.testing.assert_allclose(a.episode_returns, b.episode_returns)  # random phase: same actions, raw returns
+
+
+def test_resume_continues_from_the_checkpoint(tmp_path):
+    torch.set_num_threads(1)
+    from rlcore.checkpoint import load_checkpoint
+
+    cfg = Config(exploration="param", **{**SMALL, "learning_starts": 100})
+    train("Pendulum-v1", cfg, steps=400, seed=0, out=tmp_path)
+    first = load_checkpoint(tmp_path / "checkpoint.pt")
+    resumed = train("Pendulum-v1", cfg, steps=600, seed=0, out=tmp_path)
+    assert first["step"] == 400 and resumed.steps == 600
+    assert len(load_checkpoint(tmp_path / "checkpoint.pt")["replay"]["rewards"]) == 600  # kept the 400
+    with pytest.raises(ValueError, match="holds a ddpg run"):
+        train("Pendulum-v1", cfg, steps=600, seed=1, out=tmp_path)

@@ -103,3 +103,15 @@ def test_checkpoint_policy_matches_and_carries_observation_scaling(tmp_path):
     np.testing.assert_allclose(policy(obs), result.policy(obs))
     assert np.all(np.abs(policy(obs)) <= 2.0)  # within Pendulum's action bounds
     assert (tmp_path / "updates.csv").exists()
+
+
+def test_resume_restores_iteration_and_observation_statistics(tmp_path):
+    torch.set_num_threads(1)
+    from rlcore.checkpoint import load_checkpoint
+
+    train("Pendulum-v1", Config(**SMALL), steps=512, seed=0, out=tmp_path)
+    first = load_checkpoint(tmp_path / "checkpoint.pt")
+    resumed = train("Pendulum-v1", Config(**SMALL), steps=1_024, seed=0, out=tmp_path)
+    second = load_checkpoint(tmp_path / "checkpoint.pt")
+    assert (first["iteration"], second["iteration"], resumed.steps) == (1, 2, 1_024)
+    assert second["obs_count"] > first["obs_count"]  # statistics continued, not restarted
