@@ -96,9 +96,63 @@ def _dqn_lunarlander() -> Experiment:
     )
 
 
+# RL-Zoo's tuned PPO settings for the MuJoCo tasks (rl-baselines3-zoo, hyperparams/ppo.yml, the -v4 entries,
+# with `normalize: true`): ReLU 256x256 actor and critic, default init, log std -2, constant step size.
+# SB3's value loss is the plain mean squared error; rlcore's has a 1/2 in front, hence 2 * vf_coef.
+ZOO_PPO: dict[str, dict[str, Any]] = {
+    "HalfCheetah-v5": {"n_steps": 512, "batch_size": 64, "n_epochs": 20, "learning_rate": 2.0633e-05,
+                       "anneal_lr": False, "gamma": 0.98, "gae_lambda": 0.92, "clip_range": 0.1,
+                       "ent_coef": 0.000401762, "vf_coef": 2 * 0.58096, "max_grad_norm": 0.8},
+    "Hopper-v5": {"n_steps": 512, "batch_size": 32, "n_epochs": 5, "learning_rate": 9.80828e-05,
+                  "anneal_lr": False, "gamma": 0.999, "gae_lambda": 0.99, "clip_range": 0.2,
+                  "ent_coef": 0.00229519, "vf_coef": 2 * 0.835671, "max_grad_norm": 0.7},
+}
+_ZOO_PPO_NET = {"hidden": (256, 256), "activation": "relu", "ortho_init": False, "log_std_init": -2.0}
+
+
+def _ppo_mujoco() -> Experiment:
+    seeds = (0, 1, 2, 3, 4)
+    evals = {"eval_every": 20_000, "eval_episodes": 5, "checkpoint_every": 50_000}
+    return Experiment(
+        "ppo-mujoco",
+        "PPO (clipped) on HalfCheetah-v5 and Hopper-v5, 1M steps, RL-Zoo's tuned hyperparameters, 5 seeds",
+        tuple(RunSpec(env.split("-")[0].lower(), "ppo", env, 1_000_000, seeds,
+                      {**hp, **_ZOO_PPO_NET, **evals}, f"PPO-clip on {env}, RL-Zoo settings")
+              for env, hp in ZOO_PPO.items()),
+    )
+
+
+# The course report's DDPG settings (its Tables 1-3), in rlcore's names. The report does not give the
+# initial scale of its decaying Gaussian exploration noise; rlcore uses 0.3 of the action half-range.
+REPORT_DDPG: dict[str, tuple[int, dict[str, Any]]] = {
+    # env: (steps = epochs x step-per-epoch, Config overrides)
+    "Ant-v5": (250_000, {"buffer_size": 100_000, "hidden": (256,), "tau": 0.005, "batch_size": 256,
+                         "learning_starts": 25_000, "explore_decay": 0.999995, "reward_scale": 10.0}),
+    "HalfCheetah-v5": (200_000, {"buffer_size": 1_000_000, "hidden": (256,), "tau": 0.001, "batch_size": 64,
+                                 "learning_starts": 5_000, "explore_decay": 0.99998, "reward_scale": 1.0}),
+    "Hopper-v5": (400_000, {"buffer_size": 100_000, "hidden": (512,), "tau": 0.001, "batch_size": 64,
+                            "learning_starts": 10_000, "explore_decay": 0.99998, "reward_scale": 0.5}),
+}
+_REPORT_DDPG_COMMON = {"actor_lr": 1e-4, "critic_lr": 1e-3, "gamma": 0.99, "exploration": "gaussian",
+                       "noise_sigma": 0.3, "eval_every": 10_000, "eval_episodes": 5, "checkpoint_every": 50_000}
+
+
+def _ddpg_report() -> Experiment:
+    seeds = (0, 1, 2)
+    return Experiment(
+        "ddpg-report",
+        "DDPG with the course report's settings (Tables 1-3) at its budgets on Ant, HalfCheetah and Hopper -v5, 3 seeds",
+        tuple(RunSpec(env.split("-")[0].lower(), "ddpg", env, steps, seeds, {**_REPORT_DDPG_COMMON, **hp},
+                      f"DDPG on {env}, the report's settings")
+              for env, (steps, hp) in REPORT_DDPG.items()),
+    )
+
+
 EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "dqn-cartpole": _dqn_cartpole,
     "dqn-lunarlander": _dqn_lunarlander,
+    "ppo-mujoco": _ppo_mujoco,
+    "ddpg-report": _ddpg_report,
 }
 
 

@@ -44,6 +44,7 @@ POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
 
 OBJECTIVES = ("clip", "kl")
+ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
 
 
 @dataclass
@@ -93,7 +94,11 @@ class Config:
     max_grad_norm: float = 0.5
     """Clip the gradient's global norm to this."""
     hidden: tuple[int, ...] = (64, 64)
-    """Hidden layers of the actor and of the critic (separate networks, tanh) [hidden-size]."""
+    """Hidden layers of the actor and of the critic (separate networks) [hidden-size]."""
+    activation: str = "tanh"
+    """Hidden-layer nonlinearity: ``"tanh"`` (the PPO paper) or ``"relu"`` (RL-Zoo's tuned MuJoCo settings)."""
+    ortho_init: bool = True
+    """Orthogonal initialization with a small last policy layer; False keeps PyTorch's default init."""
     log_std_init: float = 0.0
     """Initial log standard deviation of the Gaussian policy (continuous actions)."""
     eval_every: int = 10_000
@@ -107,6 +112,8 @@ class Config:
 
     def __post_init__(self) -> None:
         self.hidden = tuple(int(h) for h in self.hidden)
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
         if self.batch_size > self.n_steps * self.num_envs:
@@ -154,13 +161,15 @@ def normalize(x: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
 class ActorCritic(nn.Module):
     """A Gaussian (continuous) or categorical (discrete) policy pi(a|s) and a value function V(s)."""
 
-    def __init__(self, obs_dim: int, act_dim: int, discrete: bool, hidden=(64, 64), log_std_init: float = 0.0):
+    def __init__(self, obs_dim: int, act_dim: int, discrete: bool, hidden=(64, 64), log_std_init: float = 0.0,
+                 activation: str = "tanh", ortho_init: bool = True):
         super().__init__()
         self.discrete = discrete
-        self.actor = mlp([obs_dim, *hidden, act_dim], activation=nn.Tanh)
-        self.critic = mlp([obs_dim, *hidden, 1], activation=nn.Tanh)
+        act = ACTIVATIONS[activation]
+        self.actor = mlp([obs_dim, *hidden, act_dim], activation=act)
+        self.critic = mlp([obs_dim, *hidden, 1], activation=act)
         self.log_std = None if discrete else nn.Parameter(torch.full((act_dim,), float(log_std_init)))
-        for net, last_gain in ((self.actor, 0.01), (self.critic, 1.0)):  # orthogonal init, small policy output
+        for net, last_gain in ((self.actor, 0.01), (self.critic, 1.0)) if ortho_init else ():  # small policy output
             linears = [m for m in net if isinstance(m, nn.Linear)]
             for m in linears:
                 nn.init.orthogonal_(m.weight, gain=last_gain if m is linears[-1] else np.sqrt(2))
@@ -169,8 +178,8 @@ class ActorCritic(nn.Module):
     def distribution(self, obs: torch.Tensor) -> torch.distributions.Distribution:
         out = self.actor(obs)
         if self.discrete:
-            return torch.distributions.Categorical(logits=out)
-        return torch.distributions.Normal(out, self.log_std.exp().expand_as(out))
+            return torch.distributions.Categorical(logits=out, validate_args=False)
+        return torch.distributions.Normal(out, self.log_std.exp().expand_as(out), validate_args=False)
 
     def log_prob(self, dist: torch.distributions.Distribution, actions: torch.Tensor) -> torch.Tensor:
         lp = dist.log_prob(actions)
@@ -182,6 +191,12 @@ class ActorCritic(nn.Module):
     def deterministic(self, obs: torch.Tensor) -> torch.Tensor:
         out = self.actor(obs)
         return out.argmax(-1) if self.discrete else out
+
+
+def make_agent(spaces: dict[str, Any], config: Config) -> ActorCritic:
+    """The actor-critic for these observation/action spaces (see :func:`check_spaces`) and Config."""
+    return ActorCritic(spaces["obs_dim"], spaces["act_dim"], spaces["discrete"], config.hidden, config.log_std_init,
+                       config.activation, config.ortho_init)
 
 
 class PPOPolicy:
@@ -205,7 +220,7 @@ class PPOPolicy:
         return np.clip(a, self.low, self.high)
 
 
-def _spaces(env: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str, Any]:
+def check_spaces(env: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str, Any]:
     obs = getattr(env, "single_observation_space", env.observation_space)
     act = getattr(env, "single_action_space", env.action_space)
     if not isinstance(obs, gym.spaces.Box) or len(obs.shape) != 1:
@@ -264,9 +279,9 @@ def train(
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     envs = make_envs(env_id, config, seed)
-    spaces = _spaces(envs, env_id)
-    agent = ActorCritic(spaces["obs_dim"], spaces["act_dim"], spaces["discrete"], config.hidden, config.log_std_init)
-    optimizer = torch.optim.Adam(agent.parameters(), lr=config.learning_rate, eps=1e-5)
+    spaces = check_spaces(envs, env_id)
+    agent = make_agent(spaces, config)
+    optimizer = torch.optim.Adam(agent.parameters(), lr=config.learning_rate, eps=1e-5, fused=True)
     obs_norm = _find(envs, gym.wrappers.vector.NormalizeObservation)
     rew_norm = _find(envs, gym.wrappers.vector.NormalizeReward)
     eval_env = make_env(env_id, **config.env_kwargs)
@@ -329,6 +344,7 @@ def train(
     # Gymnasium's vector envs reset an ended episode on the *next* step, which ignores its action:
     # such "reset steps" are recorded but never learned from.
     ended = np.zeros(n_envs, dtype=bool)
+    have_next = np.zeros((T, n_envs), dtype=bool)  # where V(s_{t+1}) was computed during the rollout
 
     obs, _ = envs.reset(seed=seed + 1_000 * iteration)
     bar = tqdm(total=iterations * per_iter, initial=min(step, iterations * per_iter), disable=not progress,
@@ -359,9 +375,16 @@ def train(
                         if log is not None:
                             log.log(episode=len(returns), step=end_steps[-1], episode_return=returns[-1],
                                     episode_length=int(info["episode"]["l"][i]))
-                with torch.no_grad():  # V(s_{t+1}); at a time limit, s_{t+1} is the episode's last state
-                    next_val_buf[t] = agent.value(torch.as_tensor(next_obs, dtype=torch.float32)).numpy()
+                # V(s_{t+1}) is V of the next step's observation, except where an episode ended: there
+                # s_{t+1} is the episode's last state (bootstrapped at a time limit), computed now
+                if ended.any() or t == T - 1:
+                    with torch.no_grad():
+                        next_val_buf[t] = agent.value(torch.as_tensor(next_obs, dtype=torch.float32)).numpy()
+                    have_next[t] = True
                 obs = next_obs
+            fill = ~have_next[:-1]
+            next_val_buf[:-1][fill] = val_buf[1:][fill]
+            have_next[:] = False
             step += per_iter
             # 2. advantages
             adv, ret = gae(rew_buf, val_buf, next_val_buf, term_buf, end_buf, config.gamma, config.gae_lambda)
@@ -441,7 +464,7 @@ def make_config(algo: str, **overrides: Any) -> Config:
 def load_policy(ckpt: dict[str, Any]) -> PPOPolicy:
     sp = ckpt["spaces"]
     config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
-    agent = ActorCritic(sp["obs_dim"], sp["act_dim"], sp["discrete"], config.hidden)
+    agent = make_agent(sp, config)
     agent.load_state_dict(ckpt["agent"])
     mean, var = ckpt.get("obs_mean"), ckpt.get("obs_var")
     to_np = lambda t: None if t is None else t.numpy()  # noqa: E731

@@ -62,8 +62,13 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
 
 
 def git_commit(cwd: str | os.PathLike | None = None) -> str | None:
-    """The current git commit of the rlcore checkout (``+dirty`` if it has changes), or None."""
+    """The current git commit of the rlcore checkout (``+dirty`` if it has changes), or None.
+
+    A copy of the tree without ``.git`` (a remote machine, say) can name its commit in ``RLCORE_COMMIT``.
+    """
     cwd = cwd or Path(__file__).resolve().parent
+    if os.environ.get("RLCORE_COMMIT"):
+        return os.environ["RLCORE_COMMIT"]
     try:
         sha = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, timeout=10
