@@ -60,6 +60,32 @@ class CSVLogger:
         self.close()
 
 
+def drop_rows_after(path: str | os.PathLike, step: int, column: str = "step") -> int:
+    """Remove the rows of a log whose ``column`` is past ``step``; returns how many were removed.
+
+    A run resumed from a checkpoint taken at ``step`` redoes what came after it; without this, those
+    steps would appear twice in its log.
+    """
+    path = Path(path)
+    if not path.exists():
+        return 0
+    with path.open(newline="") as f:
+        reader = csv.DictReader(f)
+        header, rows = reader.fieldnames, list(reader)
+    if not header or column not in header:
+        return 0
+    keep = [r for r in rows if not r[column] or float(r[column]) <= step]
+    if len(keep) == len(rows):
+        return 0
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=header)
+        writer.writeheader()
+        writer.writerows(keep)
+    os.replace(tmp, path)
+    return len(rows) - len(keep)
+
+
 def _cell(value: Any) -> Any:
     if isinstance(value, (np.generic,)):
         return value.item()

@@ -4,7 +4,8 @@
 
     DIR/config.json     the algorithm's Config, the environment id, seed and step budget
     DIR/meta.json       the command, versions (Python, torch, Gymnasium, MuJoCo, NumPy, rlcore), git commit
-    DIR/progress.csv    one row per episode (or update), appended to on resume
+    DIR/progress.csv    one row per episode (or update), appended to on resume (rows past the
+                        checkpoint's step are dropped first, so none appears twice)
     DIR/checkpoint.pt   the latest checkpoint: the trained policy plus what a resume needs
 
 Every number the book shows can be traced back to these files.
@@ -133,8 +134,9 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
     """Open a run's output folder: ``(run folder, checkpoint to resume from or None)``.
 
     No ``out``: ``(None, None)``. A folder with a checkpoint of the same algorithm, environment and seed
-    is resumed; one of another run is an error. A new folder gets ``config.json`` and ``meta.json``
-    (``meta`` adds fields to the latter).
+    is resumed: its CSV logs lose the rows past the checkpoint's step and ``meta.json`` records the resume
+    (step, time, machine, versions, commit) under ``resumes``. One of another run is an error. A new folder
+    gets ``config.json`` and ``meta.json`` (``meta`` adds fields to the latter).
     """
     if out is None:
         return None, None
@@ -148,6 +150,16 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
                 f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} (seed {ckpt.get('seed')}); "
                 "choose another --out folder or delete it."
             )
+        from rlcore.logger import drop_rows_after
+
+        for log in sorted(run.root.glob("*.csv")):
+            drop_rows_after(log, int(ckpt.get("step", 0)))
+        if run.meta.exists():
+            record = json.loads(run.meta.read_text())
+            resume = run_metadata(step=int(ckpt.get("step", 0)))
+            record.setdefault("resumes", []).append({k: resume[k] for k in ("step", "started", "command", "commit",
+                                                                             "machine", "versions")})
+            write_json(run.meta, record)
         return run, ckpt
     write_json(run.config, {"algo": algo, "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
     write_json(run.meta, run_metadata(algo=algo, env_id=env_id, seed=seed, steps=steps, **meta))

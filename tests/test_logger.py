@@ -46,3 +46,15 @@ def test_text_columns_stay_text(tmp_path):
         log.log(name="a", v=1)
     assert read_csv(path)["name"].tolist() == ["a"]
     assert read_csv(tmp_path / "p.csv")["v"].dtype == float
+
+
+def test_drop_rows_after_removes_only_the_rows_past_the_step(tmp_path):
+    from rlcore.logger import drop_rows_after
+
+    path = tmp_path / "eval.csv"
+    with CSVLogger(path, ["step", "r"]) as log:
+        for step in (100, 200, 300, 400):
+            log.log(step=step, r=float(step))
+    assert drop_rows_after(path, 250) == 2
+    assert list(read_csv(path)["step"]) == [100, 200]
+    assert drop_rows_after(path, 250) == 0

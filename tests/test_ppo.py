@@ -115,3 +115,23 @@ def test_resume_restores_iteration_and_observation_statistics(tmp_path):
     second = load_checkpoint(tmp_path / "checkpoint.pt")
     assert (first["iteration"], second["iteration"], resumed.steps) == (1, 2, 1_024)
     assert second["obs_count"] > first["obs_count"]  # statistics continued, not restarted
+
+
+def test_resume_drops_log_rows_written_after_the_checkpoint_and_records_itself(tmp_path):
+    """A run killed between two checkpoints redoes those steps; its logs must not show them twice."""
+    import json
+
+    from rlcore.logger import read_csv
+
+    torch.set_num_threads(1)
+    train("Pendulum-v1", Config(**SMALL), steps=512, seed=0, out=tmp_path)
+    with (tmp_path / "progress.csv").open() as f:
+        header = f.readline().strip().split(",")
+    with (tmp_path / "progress.csv").open("a") as f:  # a row from after the checkpoint, then the crash
+        f.write(",".join("777" if h == "step" else "-12345" for h in header) + "\n")
+    train("Pendulum-v1", Config(**SMALL), steps=1_024, seed=0, out=tmp_path)
+    steps = read_csv(tmp_path / "progress.csv")["step"]
+    assert 777 not in steps.tolist() and -12345 not in read_csv(tmp_path / "progress.csv")["episode_return"].tolist()
+    assert np.all(np.diff(steps) >= 0)  # (parallel environments can finish episodes at the same step)
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert [r["step"] for r in meta["resumes"]] == [512]
