@@ -82,3 +82,14 @@ def test_load_or_train_falls_back_to_a_live_run_and_says_so(tiny, tmp_path):
     assert "seeds [0] (1 of 1), 600 steps" in text and "python -m rlcore experiments run tiny" in text
     assert "{warning}" not in text
     assert len(stored.seeds[0].episode_returns) == len(stored.seeds[0].episode_end_steps) > 0
+
+
+def test_report_metric_sums_rewards_per_epoch_over_the_last_epochs():
+    from rlcore.experiments import report_metric
+
+    # four 1000-step episodes in 2000-step epochs: each epoch collects two episodes' returns
+    log = {"step": np.array([1000, 2000, 3000, 4000, 4500]), "episode_return": np.array([1.0, 2.0, 10.0, 20.0, 99.0])}
+    assert report_metric(log, epoch_steps=2000, last=1) == 30.0   # the unfinished third epoch is left out
+    assert report_metric(log, epoch_steps=2000, last=20) == 16.5  # only two epochs exist: (3 + 30) / 2
+    with pytest.raises(ValueError, match="less than one epoch"):
+        report_metric(log, epoch_steps=10_000)
