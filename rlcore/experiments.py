@@ -381,6 +381,11 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
             f"each; made by `{command}` at commit {commits_text}; Gymnasium {v.get('gymnasium')}, PyTorch "
             f"{v.get('torch')}, NumPy {v.get('numpy')}, Python {v.get('python')}, "
             f"{meta.get('machine', {}).get('cpus', '?')} CPUs.")
+    resumes = [(s.seed, r) for s in run.seeds for r in s.meta.get("resumes", [])]
+    if resumes:
+        text += " Resumed from a checkpoint: " + "; ".join(
+            f"seed {seed} at step {r['step']:,} ({r.get('machine', {}).get('cpus', '?')} CPUs, commit "
+            f"{str(r.get('commit'))[:7]}, PyTorch {r.get('versions', {}).get('torch')})" for seed, r in resumes) + "."
     if run.missing:
         text += (f"\n\n:::{{warning}}\nSeeds {run.missing} of *{run.label}* are not in `{folder}` yet; this page "
                  f"shows the {len(seeds)} that are. Run `{command}` to finish them.\n:::")
