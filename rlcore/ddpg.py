@@ -272,9 +272,13 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 critic_opt.zero_grad(set_to_none=True)
                 loss_q.backward()
                 critic_opt.step()
+                # the actor's gradient flows through the critic, but not into the critic's weights
+                # (their gradients would be thrown away by the next critic update: skipping them saves time)
+                critic.requires_grad_(False)
                 loss_pi = actor_loss(actor, critic, o)
                 actor_opt.zero_grad(set_to_none=True)
                 loss_pi.backward()
+                critic.requires_grad_(True)
                 actor_opt.step()
                 soft_update(actor_t, actor, config.tau)
                 soft_update(critic_t, critic, config.tau)

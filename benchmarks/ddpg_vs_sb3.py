@@ -1,0 +1,151 @@
+"""Throughput of rlcore's DDPG against Stable-Baselines3's DDPG, same task, hyperparameters and budget.
+
+    pip install -r requirements.txt -r benchmarks/requirements.txt
+    python benchmarks/ddpg_vs_sb3.py --env HalfCheetah-v5 --steps 6000 --learning-starts 1000 --repeats 2
+
+Both train from scratch in this one process, one after the other (alternating over ``--repeats``),
+with one torch thread each, no evaluation, no checkpoints and no logging during training. The figure is
+environment steps per second of wall time from building the model (environment, networks, optimizers,
+replay memory) to the end of training; the verdict is the ratio of medians. One-time process costs (the
+first MuJoCo environment, PyTorch's lazy import of torch._dynamo in the first optimizer: seconds) are paid
+before any timing, so that they are not charged to whichever library runs first.
+
+What is the same in both: rlcore.ddpg.Config's "modern" defaults, which SB3's DDPG can express exactly:
+
+- actor and critic MLPs with two hidden layers of 256, ReLU, tanh-squashed actor output scaled to the action
+  box, the critic reading the concatenated observation and action (SB3: ``net_arch=[256, 256]``, one critic);
+- Adam with step size 1e-3 for actor and critic (PyTorch's default eps), batch 256, gamma 0.99, tau 0.005,
+  a replay memory of 1,000,000 transitions sampled uniformly, one gradient step (critic, then actor, then
+  both soft target updates) after every environment step (``train_freq=1, gradient_steps=1``);
+- exploration: uniformly random actions for the first ``learning_starts`` steps, then mu(s) plus Gaussian
+  noise N(0, 0.1^2) in units of the action box's half-width, without decay (SB3: ``NormalActionNoise`` with
+  sigma 0.1 on its [-1, 1]-scaled actions), clipped to the box; rewards unscaled (rlcore ``reward_scale``
+  1); time-limit truncations bootstrap in both.
+
+``learning_starts`` is rlcore's 10,000 by default; the recorded run uses ``--learning-starts 1000`` so that
+most of a short budget (5,000 of 6,000 steps) is spent training, which is where both spend their time.
+
+What differs: SB3's DDPG is its TD3 with the tricks switched off, so it still draws (and clips to zero)
+target-policy noise and takes a minimum over its one critic; rlcore starts learning at step
+``learning_starts`` and SB3 one step later (one gradient step more for rlcore).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import torch
+
+
+def rlcore_ddpg(env_id: str, steps: int, seed: int, cfg: dict) -> float:
+    from rlcore import ddpg
+
+    start = time.perf_counter()
+    config = ddpg.Config(eval_every=0, checkpoint_every=10**12, **cfg)
+    ddpg.train(env_id, config, steps=steps, seed=seed)
+    return time.perf_counter() - start
+
+
+def sb3_ddpg(env_id: str, steps: int, seed: int, cfg: dict) -> float:
+    import gymnasium as gym
+    import numpy as np
+    from stable_baselines3 import DDPG
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    start = time.perf_counter()
+    env = gym.make(env_id)
+    n_act = env.action_space.shape[0]
+    model = DDPG(
+        "MlpPolicy", env, seed=seed, verbose=0, device="cpu",
+        learning_rate=cfg["actor_lr"], buffer_size=cfg["buffer_size"], learning_starts=cfg["learning_starts"],
+        batch_size=cfg["batch_size"], tau=cfg["tau"], gamma=cfg["gamma"], train_freq=1, gradient_steps=1,
+        action_noise=NormalActionNoise(np.zeros(n_act), cfg["noise_sigma"] * np.ones(n_act)),
+        policy_kwargs={"net_arch": list(cfg["hidden"]), "activation_fn": torch.nn.ReLU, "n_critics": 1},
+    )
+    model.learn(total_timesteps=steps)
+    return time.perf_counter() - start
+
+
+def warm_up(env_id: str) -> None:
+    """Pay the process's one-time costs before any timing: the MuJoCo environment's first construction and
+    PyTorch's lazy import of torch._dynamo in the first optimizer (seconds, which whichever library ran first
+    would otherwise be charged)."""
+    import gymnasium as gym
+
+    gym.make(env_id).close()
+    torch.optim.Adam([torch.zeros(1, requires_grad=True)])
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--env", default="HalfCheetah-v5")
+    p.add_argument("--steps", type=int, default=6_000)
+    p.add_argument("--learning-starts", type=int, default=None, help="default: rlcore.ddpg.Config's")
+    p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="results/benchmarks/ddpg-vs-sb3.json")
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    load_start = os.getloadavg()
+
+    import stable_baselines3  # noqa: F401  (imports outside the timed region)
+    from stable_baselines3 import DDPG  # noqa: F401
+
+    from rlcore import ddpg
+    warm_up(args.env)
+
+    d = ddpg.Config()
+    if args.learning_starts is not None:
+        d.learning_starts = args.learning_starts
+    if (d.exploration, d.explore_decay, d.reward_scale) != ("gaussian", 1.0, 1.0) or d.actor_lr != d.critic_lr:
+        raise SystemExit("rlcore.ddpg.Config's defaults changed: SB3 cannot express them (see this script's docstring)")
+    cfg = {k: getattr(d, k) for k in ("hidden", "actor_lr", "critic_lr", "gamma", "tau", "buffer_size", "batch_size",
+                                       "learning_starts", "exploration", "noise_sigma", "explore_decay", "reward_scale")}
+    times: dict[str, list[float]] = {"rlcore": [], "sb3": []}
+    for r in range(args.repeats):
+        for name, fn in (("rlcore", rlcore_ddpg), ("sb3", sb3_ddpg)):
+            t = fn(args.env, args.steps, args.seed + r, cfg)
+            times[name].append(t)
+            print(f"repeat {r + 1}/{args.repeats}  {name:6s}  {args.steps / t:8.0f} env-steps/s  ({t:.1f} s)  "
+                  f"load {os.getloadavg()[0]:.2f}", flush=True)
+    load_end = os.getloadavg()
+    sps = {k: args.steps / statistics.median(v) for k, v in times.items()}
+    ratio = sps["rlcore"] / sps["sb3"]
+
+    import gymnasium
+    import mujoco
+
+    import rlcore
+    from rlcore.runs import git_commit
+
+    command = f"python benchmarks/ddpg_vs_sb3.py --env {args.env} --steps {args.steps}"
+    if args.learning_starts is not None:
+        command += f" --learning-starts {args.learning_starts}"
+    record = {
+        "benchmark": "ddpg-vs-sb3", "env_id": args.env, "steps": args.steps, "repeats": args.repeats,
+        "hyperparameters": {**{k: list(v) if isinstance(v, tuple) else v for k, v in cfg.items()},
+                            "train_freq": 1, "gradient_steps": 1},
+        "seconds": times, "env_steps_per_second_per_repeat": {k: [args.steps / t for t in v] for k, v in times.items()},
+        "env_steps_per_second": sps, "ratio_rlcore_over_sb3": ratio, "target_ratio": 1.5,
+        "command": f"{command} --repeats {args.repeats}",
+        "versions": {"rlcore": rlcore.__version__, "stable_baselines3": stable_baselines3.__version__,
+                     "torch": torch.__version__, "gymnasium": gymnasium.__version__, "mujoco": mujoco.__version__,
+                     "python": platform.python_version()},
+        "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+                    "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(),
+                    "loadavg_start": list(load_start), "loadavg_end": list(load_end)},
+        "commit": git_commit(),
+    }
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
+    print(f"rlcore {sps['rlcore']:.0f} env-steps/s, SB3 {sps['sb3']:.0f} env-steps/s: ratio {ratio:.2f}x  -> {args.out}")
+
+
+if __name__ == "__main__":
+    main()
