@@ -33,12 +33,12 @@ from torch import nn
 from tqdm import tqdm
 
 from rlcore.buffers import gae
-from rlcore.checkpoint import save_checkpoint
+from rlcore.checkpoint import load_checkpoint, save_checkpoint
 from rlcore.envs import make_env, make_vec_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.nets import mlp
-from rlcore.runs import config_dict, open_run
+from rlcore.runs import RunDir, config_dict, open_run
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -192,11 +192,28 @@ class ActorCritic(nn.Module):
         out = self.actor(obs)
         return out.argmax(-1) if self.discrete else out
 
+    def forward(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(log pi(a|s), entropy of pi(.|s), V(s)): what the PPO loss needs, in one call.
+
+        The loss goes through ``forward`` so that a ``DistributedDataParallel`` wrapper (:mod:`rlcore.dppo`)
+        averages the gradients across workers.
+        """
+        dist = self.distribution(obs)
+        logp = self.log_prob(dist, actions)
+        value = self.value(obs)
+        entropy = dist.entropy() if self.discrete else dist.entropy().sum(-1)
+        return logp, entropy, value
+
 
 def make_agent(spaces: dict[str, Any], config: Config) -> ActorCritic:
     """The actor-critic for these observation/action spaces (see :func:`check_spaces`) and Config."""
     return ActorCritic(spaces["obs_dim"], spaces["act_dim"], spaces["discrete"], config.hidden, config.log_std_init,
                        config.activation, config.ortho_init)
+
+
+def make_optimizer(agent: nn.Module, config: Config) -> torch.optim.Optimizer:
+    """One Adam for actor and critic (its learning rate is set every iteration when ``anneal_lr``)."""
+    return torch.optim.Adam(agent.parameters(), lr=config.learning_rate, eps=1e-5, fused=True)
 
 
 class PPOPolicy:
@@ -255,6 +272,114 @@ def _find(envs, cls):
     return envs
 
 
+class Rollout:
+    """One iteration's transitions, preallocated: arrays of shape ``(n_steps, num_envs[, dim])``.
+
+    Gymnasium's vector envs reset an ended episode on the *next* step, which ignores its action: such
+    "reset steps" are recorded (``valid`` 0) but never learned from. ``ended`` carries over to the next rollout.
+    """
+
+    def __init__(self, spaces: dict[str, Any], config: Config):
+        T, n_envs = config.n_steps, config.num_envs
+        self.obs = np.zeros((T, n_envs, spaces["obs_dim"]), dtype=np.float32)
+        self.act = np.zeros((T, n_envs) if spaces["discrete"] else (T, n_envs, spaces["act_dim"]), dtype=np.float32)
+        self.logp, self.rew, self.val, self.next_val, self.term, self.end, self.valid = (
+            np.zeros((T, n_envs), dtype=np.float32) for _ in range(7))
+        self.ended = np.zeros(n_envs, dtype=bool)
+        self.have_next = np.zeros((T, n_envs), dtype=bool)  # where V(s_{t+1}) was computed during the rollout
+
+
+def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndarray, buf: Rollout,
+                    on_episode=None) -> np.ndarray:
+    """Run the policy for ``n_steps`` steps in each environment, filling ``buf``; returns the next observation.
+
+    ``on_episode(t, episode_return, episode_length)`` is called for every episode that ends at rollout step t.
+    """
+    T = len(buf.obs)
+    for t in range(T):
+        with torch.no_grad():
+            x = torch.as_tensor(obs, dtype=torch.float32)
+            dist = agent.distribution(x)
+            action = dist.sample()
+            buf.logp[t] = agent.log_prob(dist, action).numpy()
+            buf.val[t] = agent.value(x).numpy()
+        a = action.numpy()
+        next_obs, reward, terminated, truncated, info = envs.step(a)
+        buf.obs[t], buf.act[t], buf.rew[t] = obs, a, reward
+        buf.valid[t] = ~buf.ended
+        buf.ended = terminated | truncated
+        buf.term[t], buf.end[t] = terminated, buf.ended | ~buf.valid[t].astype(bool)
+        if "episode" in info and on_episode is not None:
+            for i in np.flatnonzero(info["_episode"]):
+                on_episode(t, float(info["episode"]["r"][i]), int(info["episode"]["l"][i]))
+        # V(s_{t+1}) is V of the next step's observation, except where an episode ended: there
+        # s_{t+1} is the episode's last state (bootstrapped at a time limit), computed now
+        if buf.ended.any() or t == T - 1:
+            with torch.no_grad():
+                buf.next_val[t] = agent.value(torch.as_tensor(next_obs, dtype=torch.float32)).numpy()
+            buf.have_next[t] = True
+        obs = next_obs
+    fill = ~buf.have_next[:-1]
+    buf.next_val[:-1][fill] = buf.val[1:][fill]
+    buf.have_next[:] = False
+    return obs
+
+
+def rollout_batch(buf: Rollout, config: Config) -> dict[str, torch.Tensor]:
+    """GAE(lambda) advantages and returns of a rollout, flattened to its valid transitions.
+
+    Keys: ``obs``, ``act``, ``logp`` (of the acting policy), ``adv``, ``ret``.
+    """
+    adv, ret = gae(buf.rew, buf.val, buf.next_val, buf.term, buf.end, config.gamma, config.gae_lambda)
+    n = buf.valid.size
+    keep = buf.valid.reshape(-1).astype(bool)
+    return {"obs": torch.as_tensor(buf.obs.reshape(n, -1)[keep]),
+            "act": torch.as_tensor(buf.act.reshape(n, *buf.act.shape[2:])[keep]),
+            "logp": torch.as_tensor(buf.logp.reshape(-1)[keep]),
+            "adv": torch.as_tensor(adv.reshape(-1)[keep], dtype=torch.float32),
+            "ret": torch.as_tensor(ret.reshape(-1)[keep], dtype=torch.float32)}
+
+
+UPDATE_STATS = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction")
+"""The columns of :func:`ppo_update`'s per-minibatch statistics."""
+
+
+def ppo_update(model: nn.Module, optimizer: torch.optim.Optimizer, batch: dict[str, torch.Tensor], config: Config,
+               kl_coef: float, rng: np.random.Generator, n_batches: int | None = None) -> tuple[np.ndarray, float]:
+    """``n_epochs`` passes of minibatch gradient steps on the PPO loss over one :func:`rollout_batch`.
+
+    ``model(obs, actions)`` returns ``(log pi(a|s), entropy, V(s))``: an :class:`ActorCritic` or a
+    ``DistributedDataParallel`` around one. ``n_batches`` minibatches per epoch (default: as many as
+    ``batch_size`` allows). Returns the per-minibatch statistics (columns :data:`UPDATE_STATS`) and the
+    mean approximate KL over the last epoch (what the adaptive-KL rule reads).
+    """
+    b_obs, b_act, b_logp, b_adv, b_ret = (batch[k] for k in ("obs", "act", "logp", "adv", "ret"))
+    n = len(b_obs)
+    n_batches = n_batches or max(n // config.batch_size, 1)
+    stats = []
+    for _ in range(config.n_epochs):
+        for idx in np.array_split(rng.permutation(n), n_batches):
+            logp, entropy, value = model(b_obs[idx], b_act[idx])
+            ratio = torch.exp(logp - b_logp[idx])
+            a_mb = normalize(b_adv[idx]) if config.normalize_advantage else b_adv[idx]
+            kl = approx_kl(b_logp[idx], logp)
+            if config.objective == "clip":
+                policy_loss = clipped_surrogate(ratio, a_mb, config.clip_range)
+            else:
+                policy_loss = kl_penalty_surrogate(ratio, a_mb, kl, kl_coef)
+            value_loss = 0.5 * ((value - b_ret[idx]) ** 2).mean()
+            entropy = entropy.mean()
+            loss = policy_loss + config.vf_coef * value_loss - config.ent_coef * entropy
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm)
+            optimizer.step()
+            clip_frac = ((ratio - 1.0).abs() > config.clip_range).float().mean()
+            stats.append([policy_loss.item(), value_loss.item(), entropy.item(), kl.item(), clip_frac.item()])
+    mean_kl = float(np.mean([s[3] for s in stats[-n_batches:]]))  # over the last epoch
+    return np.array(stats), mean_kl
+
+
 @dataclass
 class Result:
     agent: ActorCritic
@@ -281,7 +406,7 @@ def train(
     envs = make_envs(env_id, config, seed)
     spaces = check_spaces(envs, env_id)
     agent = make_agent(spaces, config)
-    optimizer = torch.optim.Adam(agent.parameters(), lr=config.learning_rate, eps=1e-5, fused=True)
+    optimizer = make_optimizer(agent, config)
     obs_norm = _find(envs, gym.wrappers.vector.NormalizeObservation)
     rew_norm = _find(envs, gym.wrappers.vector.NormalizeReward)
     eval_env = make_env(env_id, **config.env_kwargs)
@@ -299,6 +424,10 @@ def train(
         var = obs_norm.obs_rms.var.copy() if obs_norm else None
         return PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
 
+    prior = RunDir(out).checkpoint if out is not None else None
+    if prior is not None and prior.exists() and load_checkpoint(prior).get("distributed"):
+        raise ValueError(f"{out} holds a data-parallel PPO run; resume it with `torchrun --nproc_per_node N -m "
+                         "rlcore.dppo ...` (see rlcore.dppo), or choose another --out folder.")
     run, ckpt = open_run(out, "ppo", env_id, seed, steps, config)
     if ckpt is not None:
         agent.load_state_dict(ckpt["agent"])
@@ -337,14 +466,13 @@ def train(
                          ret_count=float(rew_norm.return_rms.count))
         save_checkpoint(run.checkpoint, state)
 
-    obs_buf = np.zeros((T, n_envs, spaces["obs_dim"]), dtype=np.float32)
-    act_buf = np.zeros((T, n_envs) if spaces["discrete"] else (T, n_envs, spaces["act_dim"]), dtype=np.float32)
-    logp_buf, rew_buf, val_buf, next_val_buf, term_buf, end_buf, valid_buf = (
-        np.zeros((T, n_envs), dtype=np.float32) for _ in range(7))
-    # Gymnasium's vector envs reset an ended episode on the *next* step, which ignores its action:
-    # such "reset steps" are recorded but never learned from.
-    ended = np.zeros(n_envs, dtype=bool)
-    have_next = np.zeros((T, n_envs), dtype=bool)  # where V(s_{t+1}) was computed during the rollout
+    buf = Rollout(spaces, config)
+
+    def on_episode(t: int, episode_return: float, episode_length: int) -> None:
+        returns.append(episode_return)
+        end_steps.append(step + (t + 1) * n_envs)
+        if log is not None:
+            log.log(episode=len(returns), step=end_steps[-1], episode_return=returns[-1], episode_length=episode_length)
 
     obs, _ = envs.reset(seed=seed + 1_000 * iteration)
     bar = tqdm(total=iterations * per_iter, initial=min(step, iterations * per_iter), disable=not progress,
@@ -355,70 +483,10 @@ def train(
             for g in optimizer.param_groups:
                 g["lr"] = lr
             # 1. run the policy for T steps in each environment
-            for t in range(T):
-                with torch.no_grad():
-                    x = torch.as_tensor(obs, dtype=torch.float32)
-                    dist = agent.distribution(x)
-                    action = dist.sample()
-                    logp_buf[t] = agent.log_prob(dist, action).numpy()
-                    val_buf[t] = agent.value(x).numpy()
-                a = action.numpy()
-                next_obs, reward, terminated, truncated, info = envs.step(a)
-                obs_buf[t], act_buf[t], rew_buf[t] = obs, a, reward
-                valid_buf[t] = ~ended
-                ended = terminated | truncated
-                term_buf[t], end_buf[t] = terminated, ended | ~valid_buf[t].astype(bool)
-                if "episode" in info:
-                    for i in np.flatnonzero(info["_episode"]):
-                        returns.append(float(info["episode"]["r"][i]))
-                        end_steps.append(step + (t + 1) * n_envs)
-                        if log is not None:
-                            log.log(episode=len(returns), step=end_steps[-1], episode_return=returns[-1],
-                                    episode_length=int(info["episode"]["l"][i]))
-                # V(s_{t+1}) is V of the next step's observation, except where an episode ended: there
-                # s_{t+1} is the episode's last state (bootstrapped at a time limit), computed now
-                if ended.any() or t == T - 1:
-                    with torch.no_grad():
-                        next_val_buf[t] = agent.value(torch.as_tensor(next_obs, dtype=torch.float32)).numpy()
-                    have_next[t] = True
-                obs = next_obs
-            fill = ~have_next[:-1]
-            next_val_buf[:-1][fill] = val_buf[1:][fill]
-            have_next[:] = False
+            obs = collect_rollout(agent, envs, obs, buf, on_episode)
             step += per_iter
-            # 2. advantages
-            adv, ret = gae(rew_buf, val_buf, next_val_buf, term_buf, end_buf, config.gamma, config.gae_lambda)
-            keep = valid_buf.reshape(-1).astype(bool)
-            b_obs = torch.as_tensor(obs_buf.reshape(per_iter, -1)[keep])
-            b_act = torch.as_tensor(act_buf.reshape(per_iter, *act_buf.shape[2:])[keep])
-            b_logp = torch.as_tensor(logp_buf.reshape(-1)[keep])
-            b_adv = torch.as_tensor(adv.reshape(-1)[keep], dtype=torch.float32)
-            b_ret = torch.as_tensor(ret.reshape(-1)[keep], dtype=torch.float32)
-            n = len(b_obs)
-            n_batches = max(n // config.batch_size, 1)
-            # 3. n_epochs passes of minibatch gradient steps
-            stats = []
-            for _ in range(config.n_epochs):
-                for idx in np.array_split(rng.permutation(n), n_batches):
-                    dist = agent.distribution(b_obs[idx])
-                    logp = agent.log_prob(dist, b_act[idx])
-                    ratio = torch.exp(logp - b_logp[idx])
-                    a_mb = normalize(b_adv[idx]) if config.normalize_advantage else b_adv[idx]
-                    kl = approx_kl(b_logp[idx], logp)
-                    if config.objective == "clip":
-                        policy_loss = clipped_surrogate(ratio, a_mb, config.clip_range)
-                    else:
-                        policy_loss = kl_penalty_surrogate(ratio, a_mb, kl, kl_coef)
-                    value_loss = 0.5 * ((agent.value(b_obs[idx]) - b_ret[idx]) ** 2).mean()
-                    entropy = (dist.entropy() if spaces["discrete"] else dist.entropy().sum(-1)).mean()
-                    loss = policy_loss + config.vf_coef * value_loss - config.ent_coef * entropy
-                    optimizer.zero_grad(set_to_none=True)
-                    loss.backward()
-                    nn.utils.clip_grad_norm_(agent.parameters(), config.max_grad_norm)
-                    optimizer.step()
-                    clip_frac = ((ratio - 1.0).abs() > config.clip_range).float().mean()
-                    stats.append([policy_loss.item(), value_loss.item(), entropy.item(), kl.item(), clip_frac.item()])
-            mean_kl = float(np.mean([s[3] for s in stats[-n_batches:]]))  # over the last epoch
+            # 2. advantages, 3. n_epochs passes of minibatch gradient steps
+            stats, mean_kl = ppo_update(agent, optimizer, rollout_batch(buf, config), config, kl_coef, rng)
             if config.objective == "kl":
                 kl_coef = adaptive_kl_coef(kl_coef, mean_kl, config.kl_target, config.kl_beta_low,
                                            config.kl_beta_high, config.kl_alpha)

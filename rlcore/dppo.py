@@ -1,0 +1,445 @@
+"""Synchronous data-parallel PPO ("DPPO") on ``torch.distributed``: N workers, one PPO.
+
+Every worker (one process per rank) steps its own environments, computes GAE on its own rollout and runs
+PPO's minibatch updates (:func:`rlcore.ppo.ppo_update`, the same code as :func:`rlcore.ppo.train`) on it;
+the actor-critic is wrapped in ``DistributedDataParallel``, so every minibatch's gradient is averaged over
+the workers (gloo, on the CPU) before the optimizer step, and all workers hold the same weights throughout.
+After each rollout the workers merge their observation (and return) normalization statistics, and the
+adaptive-KL coefficient reads the KL averaged over the workers: the workers, and the saved policy, agree.
+
+One machine, 2 workers (``--steps`` is the total over all workers)::
+
+    torchrun --nproc_per_node 2 -m rlcore.dppo --env HalfCheetah-v5 --steps 1000000 --out runs/dppo-hc
+
+Several machines (run the same line on each; the run folder lives on rank 0's machine, ``--out`` is
+only written there)::
+
+    torchrun --nnodes 2 --nproc_per_node 8 --rdzv-backend c10d --rdzv-endpoint HOST0:29400 --rdzv-id hc1 \\
+        --max-restarts 3 -m rlcore.dppo --env HalfCheetah-v5 --steps 10000000 --out runs/dppo-hc
+    # or a static rendezvous: --nnodes 2 --node_rank 0|1 --master_addr HOST0 --master_port 29500
+
+Without torchrun (no ``RANK``/``WORLD_SIZE`` in the environment), ``python -m rlcore.dppo ...`` trains
+with a single worker; one worker draws the same random numbers as :func:`rlcore.ppo.train` and
+computes the same run.
+
+What each worker does with the seed: worker r's environments are seeded ``seed + 1000 r`` (copy i:
+``seed + 1000 r + i``; keep ``num_envs`` below 1000), its minibatch shuffling ``seed + 1000 r``, its action
+sampling ``seed`` on rank 0 (continuing the weight-initialization stream, as ppo does) and ``seed + 1000 r``
+on the others. A resumed run reseeds every worker from ``(seed, rank, iteration)``. ``num_envs``,
+``n_steps`` and ``batch_size`` are per worker: an update learns from ``world_size * num_envs * n_steps``
+transitions, in minibatches of ``world_size * batch_size``.
+
+Rank 0 writes the run folder (:func:`rlcore.runs.open_run`): ``progress.csv`` (one row per update, with
+env-steps per second), ``eval.csv`` and ``checkpoint.pt`` every ``checkpoint_updates`` updates (default:
+every update). The checkpoint is a ``ppo`` checkpoint, so ``python -m rlcore evaluate|render DIR`` and
+:func:`rlcore.ppo.load_policy` read it; its ``distributed`` entry marks it as DPPO's.
+
+When a worker dies (killed, out of memory, a lost machine), torchrun stops the others; with
+``--max-restarts K`` it then starts all workers again (up to K times), they rendezvous, rank 0 reads the
+checkpoint and hands it to every worker, and training resumes from the last completed update (at most
+``checkpoint_updates`` updates are redone; the logs drop the rows written after the checkpoint). Without
+restarts, run the same command again to resume. Environments are reset on resume, so a resumed run is not
+bit-identical to an uninterrupted one. The number of workers may change between restarts (an elastic
+``--nnodes 1:4``): the step budget, the learning-rate schedule and the statistics carry over.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+import torch.distributed as dist
+from torch.nn.parallel import DistributedDataParallel
+from tqdm import tqdm
+
+from rlcore import ppo
+from rlcore.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from rlcore.envs import make_env
+from rlcore.evaluate import evaluate_policy
+from rlcore.logger import CSVLogger
+from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
+from rlcore.ppo import Rollout, collect_rollout, ppo_update, rollout_batch
+from rlcore.runs import RunDir, config_dict, open_run
+
+ALGO = "ppo"
+"""The checkpoint's ``algo``: DPPO's checkpoints are PPO's, plus a ``distributed`` entry."""
+
+PROGRESS_COLUMNS = ["iteration", "step", "episodes", "episode_return", "env_steps_per_second", "update_seconds",
+                    "rollout_seconds", "policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction",
+                    "kl_coef", "learning_rate", "world_size"]
+"""``progress.csv``: one row per update, written by rank 0 (``episode_return``: the mean over the episodes
+that ended during the update on any worker, empty if none; ``update_seconds``: rank 0's wall time of the
+update, rollout to checkpoint; ``env_steps_per_second``: all workers' transitions over it)."""
+
+LAUNCH_HELP = ("launch it with torchrun, e.g. `torchrun --nproc_per_node 2 -m rlcore.dppo --env HalfCheetah-v5 "
+               "--steps 100000 --out runs/dppo`, or without RANK/WORLD_SIZE set for a single worker")
+
+
+@dataclass
+class Config(ppo.Config):
+    """PPO's :class:`rlcore.ppo.Config` (``num_envs``, ``n_steps``, ``batch_size`` per worker) plus DPPO's fields.
+
+    PPO's step-based ``checkpoint_every`` is not used: DPPO checkpoints every ``checkpoint_updates`` updates.
+    """
+
+    checkpoint_updates: int = 1
+    """Write checkpoint.pt every this many updates (and at the end); a restarted job redoes at most this many."""
+
+
+def make_config(algo: str = "dppo", **overrides: Any) -> Config:
+    return Config(**overrides)
+
+
+# --- torch.distributed --------------------------------------------------------------------------
+
+
+def init_distributed() -> bool:
+    """Join the process group torchrun describes (gloo), or make a one-worker group; True if this call made one.
+
+    torchrun sets ``RANK``, ``WORLD_SIZE``, ``MASTER_ADDR`` and ``MASTER_PORT``; with none of them this
+    process is the only worker. A group that already exists is used as it is.
+    """
+    if dist.is_initialized():
+        return False
+    launched = [k for k in ("RANK", "WORLD_SIZE") if k in os.environ]
+    if not launched:
+        dist.init_process_group("gloo", store=dist.HashStore(), rank=0, world_size=1)
+        return True
+    missing = [k for k in ("RANK", "WORLD_SIZE", "MASTER_ADDR", "MASTER_PORT") if k not in os.environ]
+    if missing:
+        raise ValueError(f"rlcore.dppo found {', '.join(launched)} but not {', '.join(missing)} in the environment; "
+                         f"{LAUNCH_HELP}.")
+    store, rank, world = next(dist.rendezvous("env://"))
+    # torchrun keeps one key-value store for all restarts of a job: without a prefix of its own, a restarted
+    # worker can read the address a dead worker published there and fail to connect
+    attempt = f"rlcore.dppo/restart{os.environ.get('TORCHELASTIC_RESTART_COUNT', '0')}-world{world}"
+    dist.init_process_group("gloo", store=dist.PrefixStore(attempt, store), rank=rank, world_size=world)
+    return True
+
+
+def sync_running_stats(rms, base: tuple[np.ndarray, np.ndarray, float]) -> tuple[np.ndarray, np.ndarray, float]:
+    """Merge a running mean/variance that every worker updated from the same ``base`` with its own data.
+
+    ``rms`` (a Gymnasium ``RunningMeanStd``: ``mean``, ``var``, ``count``) holds ``base`` combined with this
+    worker's new data. Afterwards every worker's ``rms`` holds ``base`` combined with all workers' new data
+    (the statistics one ``RunningMeanStd`` would have seen), and the returned copy of it is the next ``base``.
+    """
+    t = torch.from_numpy(stats_contribution(rms, base))
+    dist.all_reduce(t)
+    merged = merge_contributions(base, t.numpy())
+    rms.mean = merged[0].astype(np.asarray(rms.mean).dtype)
+    rms.var = merged[1].astype(np.asarray(rms.var).dtype)
+    rms.count = merged[2]
+    return snapshot(rms)
+
+
+def stats_contribution(rms, base: tuple[np.ndarray, np.ndarray, float]) -> np.ndarray:
+    """A worker's new data since ``base`` as sums around base's mean m0: [count, sum(x - m0), sum((x - m0)^2)].
+
+    Sums add up over workers (one all-reduce); around m0 they stay small, so float64 keeps them exact enough.
+    """
+    m0, v0, c0 = np.asarray(base[0], np.float64), np.asarray(base[1], np.float64), float(base[2])
+    mean, var, count = np.asarray(rms.mean, np.float64), np.asarray(rms.var, np.float64), float(rms.count)
+    d = mean - m0  # rms = base + new data, so count * d = sum over the new data of (x - m0)
+    return np.concatenate([[count - c0], (count * d).ravel(), (count * (var + d * d) - c0 * v0).ravel()])
+
+
+def merge_contributions(base: tuple[np.ndarray, np.ndarray, float],
+                        summed: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """``base`` combined with the summed :func:`stats_contribution` of all workers: (mean, var, count)."""
+    m0, v0, c0 = np.asarray(base[0], np.float64), np.asarray(base[1], np.float64), float(base[2])
+    k = m0.size
+    total = c0 + float(summed[0])
+    shift = summed[1:1 + k].reshape(m0.shape) / total
+    var = np.maximum((c0 * v0 + summed[1 + k:].reshape(m0.shape)) / total - shift * shift, 0.0)
+    return m0 + shift, var, total
+
+
+def snapshot(rms) -> tuple[np.ndarray, np.ndarray, float]:
+    return np.array(rms.mean, copy=True), np.array(rms.var, copy=True), float(rms.count)
+
+
+def _broadcast(obj: Any) -> Any:
+    """Rank 0's ``obj`` on every rank."""
+    box = [obj]
+    dist.broadcast_object_list(box, src=0)
+    return box[0]
+
+
+# --- training -------------------------------------------------------------------------------------
+
+
+def train(
+    env_id: str,
+    config: Config | None = None,
+    steps: int = 1_000_000,
+    seed: int = 0,
+    out: str | Path | None = None,
+    progress: bool = False,
+    dump_params: str | Path | None = None,
+    command: str | None = None,
+) -> ppo.Result:
+    """Train DPPO on this worker for (at least) ``steps`` environment steps over all workers, in whole updates.
+
+    Call it on every rank (torchrun does, via ``python -m rlcore.dppo``); outside torchrun it is a one-worker
+    run. ``out`` is rank 0's run folder (resumed if it holds a checkpoint). ``dump_params``: every rank writes
+    its final weights, optimizer state, normalization statistics and KL coefficient to ``rank{r}.pt``
+    there (to check that the workers agree). ``command``: how the job was launched, for ``meta.json``
+    (default: this process's command line). Returns this worker's :class:`rlcore.ppo.Result`.
+    """
+    config = config or Config()
+    if not isinstance(config, Config):
+        config = Config(**config_dict(config))
+    made_group = init_distributed()
+    try:
+        return _train(env_id, config, steps, seed, out, progress, dump_params, command)
+    finally:
+        if made_group:
+            dist.destroy_process_group()
+
+
+def _train(env_id, config: Config, steps, seed, out, progress, dump_params, command) -> ppo.Result:
+    rank, world = dist.get_rank(), dist.get_world_size()
+    worker_seed = seed + 1_000 * rank
+    torch.manual_seed(seed)  # the same initial weights on every worker (DDP also broadcasts rank 0's)
+    envs = ppo.make_envs(env_id, config, worker_seed)
+    spaces = ppo.check_spaces(envs, env_id)
+    agent = ppo.make_agent(spaces, config)
+    optimizer = ppo.make_optimizer(agent, config)
+    obs_norm = ppo._find(envs, gym.wrappers.vector.NormalizeObservation)
+    rew_norm = ppo._find(envs, gym.wrappers.vector.NormalizeReward)
+    eval_env = make_env(env_id, **config.env_kwargs) if rank == 0 and config.eval_every else None
+    per_update = config.n_steps * config.num_envs * world
+    iterations = -(-steps // per_update)
+    target = iterations * per_update
+    step = iteration = 0
+    kl_coef = config.kl_coef
+    returns: list[float] = []
+    end_steps: list[int] = []
+    evals: list[tuple[int, float]] = []
+    distributed = {"world_size": world, "backend": dist.get_backend()}
+
+    # rank 0 opens the run folder and hands its checkpoint (or its error) to every worker
+    run = ckpt = error = None
+    if rank == 0:
+        try:
+            path = None if out is None else RunDir(out).checkpoint
+            if path is not None and path.exists() and (prior := load_checkpoint(path)).get("algo") == ALGO \
+                    and not prior.get("distributed"):
+                raise ValueError(f"{out} holds a single-process PPO run; resume it with `python -m rlcore train ppo`, "
+                                 "or choose another --out folder.")
+            meta = {"distributed": distributed, **({"command": command} if command else {})}
+            run, ckpt = open_run(out, ALGO, env_id, seed, steps, config, **meta)
+        except (ValueError, CheckpointError) as exc:
+            error = str(exc)
+    ckpt, error = _broadcast((ckpt, error))
+    if error is not None:
+        raise ValueError(error)
+    if ckpt is not None:
+        agent.load_state_dict(ckpt["agent"])
+        optimizer.load_state_dict(ckpt["optimizer"])
+        step, iteration, kl_coef = int(ckpt["step"]), int(ckpt["iteration"]), float(ckpt["kl_coef"])
+        if obs_norm is not None:
+            rms = obs_norm.obs_rms
+            rms.mean = np.asarray(ckpt["obs_mean"]).astype(rms.mean.dtype)
+            rms.var = np.asarray(ckpt["obs_var"]).astype(rms.var.dtype)
+            rms.count = float(ckpt["obs_count"])
+        if rew_norm is not None:
+            rew_norm.return_rms.mean = np.asarray(ckpt["ret_mean"])
+            rew_norm.return_rms.var = np.asarray(ckpt["ret_var"])
+            rew_norm.return_rms.count = float(ckpt["ret_count"])
+    if ckpt is None:
+        # rank 0 continues the initialization's stream, as ppo.train does: one worker is ppo.train
+        rng = np.random.default_rng(worker_seed)
+        if rank:
+            torch.manual_seed(worker_seed)
+        reset_seed = worker_seed
+    else:
+        ss = np.random.SeedSequence([seed, rank, iteration])
+        rng = np.random.default_rng(ss)
+        torch.manual_seed(int(ss.generate_state(1)[0]))
+        reset_seed = int(ss.generate_state(2)[1])
+    model = DistributedDataParallel(agent)
+    obs_base = snapshot(obs_norm.obs_rms) if obs_norm is not None else None
+    ret_base = snapshot(rew_norm.return_rms) if rew_norm is not None else None
+
+    def policy() -> ppo.PPOPolicy:
+        mean = obs_norm.obs_rms.mean.copy() if obs_norm else None
+        var = obs_norm.obs_rms.var.copy() if obs_norm else None
+        return ppo.PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
+
+    log = eval_log = None
+    if run is not None:
+        log = CSVLogger(run.progress, PROGRESS_COLUMNS)
+        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
+
+    def checkpoint() -> None:
+        if run is None:
+            return
+        state = {"algo": ALGO, "env_id": env_id, "seed": seed, "config": config_dict(config), "step": step,
+                 "iteration": iteration, "total_steps": steps, "complete": step >= target,
+                 "agent": agent.state_dict(), "optimizer": optimizer.state_dict(), "kl_coef": kl_coef,
+                 "spaces": spaces, "obs_clip": 10.0, "distributed": distributed}
+        if obs_norm is not None:
+            state.update(obs_mean=obs_norm.obs_rms.mean, obs_var=obs_norm.obs_rms.var,
+                         obs_count=float(obs_norm.obs_rms.count))
+        else:
+            state.update(obs_mean=None, obs_var=None)
+        if rew_norm is not None:
+            state.update(ret_mean=rew_norm.return_rms.mean, ret_var=rew_norm.return_rms.var,
+                         ret_count=float(rew_norm.return_rms.count))
+        save_checkpoint(run.checkpoint, state)
+
+    buf = Rollout(spaces, config)
+    new_returns: list[float] = []
+
+    def on_episode(t: int, episode_return: float, episode_length: int) -> None:
+        returns.append(episode_return)
+        end_steps.append(step + (t + 1) * config.num_envs * world)
+        new_returns.append(episode_return)
+
+    obs, _ = envs.reset(seed=reset_seed)
+    bar = tqdm(total=target, initial=min(step, target), disable=not (progress and rank == 0), unit="step",
+               desc=f"DPPO-{config.objective} {env_id} x{world}")
+    last = time.perf_counter()
+    saved = None
+    try:
+        while step < target:
+            lr = config.learning_rate * (1.0 - step / target if config.anneal_lr else 1.0)
+            for g in optimizer.param_groups:
+                g["lr"] = lr
+            # 1. every worker runs the policy in its own environments, then they merge their statistics
+            obs = collect_rollout(agent, envs, obs, buf, on_episode)
+            rollout_seconds = time.perf_counter() - last
+            if world > 1:
+                if obs_norm is not None:
+                    obs_base = sync_running_stats(obs_norm.obs_rms, obs_base)
+                if rew_norm is not None:
+                    ret_base = sync_running_stats(rew_norm.return_rms, ret_base)
+            step += per_update
+            # 2. advantages; 3. minibatch steps with gradients averaged by DDP (the same number on every worker)
+            batch = rollout_batch(buf, config)
+            n_batches = torch.tensor(max(len(batch["obs"]) // config.batch_size, 1))
+            dist.all_reduce(n_batches, op=dist.ReduceOp.MIN)
+            stats, mean_kl = ppo_update(model, optimizer, batch, config, kl_coef, rng, int(n_batches))
+            # the workers' means: the KL for beta's rule (so beta stays the same everywhere), the logged numbers
+            summary = torch.tensor([*np.mean(stats, axis=0), mean_kl, sum(new_returns), len(new_returns)],
+                                   dtype=torch.float64)
+            dist.all_reduce(summary)
+            m = (summary[:6] / world).tolist()
+            mean_kl, episodes = m[5], int(summary[7])
+            episode_return = float(summary[6]) / episodes if episodes else float("nan")
+            new_returns.clear()
+            if config.objective == "kl":
+                kl_coef = ppo.adaptive_kl_coef(kl_coef, mean_kl, config.kl_target, config.kl_beta_low,
+                                               config.kl_beta_high, config.kl_alpha)
+            iteration += 1
+            if rank == 0:
+                crossed = lambda every: every and step // every > (step - per_update) // every  # noqa: E731
+                if crossed(config.eval_every) or (config.eval_every and step >= target):
+                    r = evaluate_policy(policy(), eval_env, config.eval_episodes, seed=seed + 10_000)
+                    agent.train()
+                    evals.append((step, float(r.mean())))
+                    if eval_log is not None:
+                        eval_log.log(step=step, mean_return=float(r.mean()), std_return=float(r.std()),
+                                     episodes=len(r))
+                if config.checkpoint_updates and iteration % config.checkpoint_updates == 0:
+                    checkpoint()
+                    saved = iteration
+                now = time.perf_counter()
+                if log is not None:
+                    log.log(iteration=iteration, step=step, episodes=episodes, episode_return=episode_return,
+                            env_steps_per_second=per_update / (now - last), update_seconds=now - last,
+                            rollout_seconds=rollout_seconds, policy_loss=m[0], value_loss=m[1], entropy=m[2],
+                            approx_kl=mean_kl, clip_fraction=m[4], kl_coef=kl_coef, learning_rate=lr,
+                            world_size=world)
+                bar.update(per_update)
+                if episodes:
+                    bar.set_postfix(ret=f"{episode_return:.1f}", refresh=False)
+            last = time.perf_counter()
+    finally:
+        bar.close()
+        envs.close()
+        if eval_env is not None:
+            eval_env.close()
+        for f in (log, eval_log):
+            if f is not None:
+                f.close()
+    if saved != iteration or saved is None:
+        checkpoint()
+    if dump_params is not None:
+        state = {"agent": agent.state_dict(), "optimizer": optimizer.state_dict(), "kl_coef": kl_coef,
+                 "step": step, "iteration": iteration}
+        for name, rms in (("obs", obs_norm and obs_norm.obs_rms), ("ret", rew_norm and rew_norm.return_rms)):
+            if rms:
+                state.update({f"{name}_mean": rms.mean, f"{name}_var": rms.var, f"{name}_count": float(rms.count)})
+        save_checkpoint(Path(dump_params) / f"rank{rank}.pt", state)
+    return ppo.Result(agent, policy(), np.array(returns), np.array(end_steps, dtype=int),
+                      np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step)
+
+
+# --- command line ---------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="torchrun --nproc_per_node N -m rlcore.dppo",
+                                description="Synchronous data-parallel PPO: run one process per worker with torchrun.")
+    p.add_argument("--env", required=True, help="Gymnasium environment id, e.g. HalfCheetah-v5")
+    p.add_argument("--steps", type=int, required=True, help="environment steps to train for, over all workers")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, help="run folder, written by rank 0 (config, progress.csv, checkpoint.pt)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a Config field (repeatable), e.g. --set n_steps=1024 --set checkpoint_updates=5")
+    p.add_argument("--env-kwargs", help="JSON keyword arguments for gymnasium.make")
+    p.add_argument("--threads", type=int, default=1, help="torch threads per worker (default 1)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on rank 0")
+    p.add_argument("--dump-params", metavar="DIR", help="(testing) every rank writes its final state to DIR/rank{r}.pt")
+    return p
+
+
+def launch_command(argv: list[str] | None = None) -> str:
+    """This job's command line as a user would type it (torchrun's options beyond the worker count are not known)."""
+    args = shlex.join(sys.argv[1:] if argv is None else argv)
+    if "LOCAL_WORLD_SIZE" not in os.environ:
+        return f"python -m rlcore.dppo {args}"
+    local, world = int(os.environ["LOCAL_WORLD_SIZE"]), int(os.environ.get("WORLD_SIZE", 1))
+    nodes = f" --nnodes {world // local}" if world > local else ""
+    return f"torchrun{nodes} --nproc_per_node {local} -m rlcore.dppo {args}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    from rlcore.__main__ import EXIT_USAGE, _overrides
+    from rlcore.envs import UnknownEnvironmentError, check_env_id
+
+    args = build_parser().parse_args(argv)
+    torch.set_num_threads(max(args.threads, 1))
+    if "RANK" not in os.environ:
+        print(f"rlcore.dppo: not started by torchrun, so training with a single worker; for N workers, {LAUNCH_HELP}.",
+              file=sys.stderr)
+    try:
+        check_env_id(args.env)
+        overrides = _overrides(Config, args.set or [])
+        if args.env_kwargs:
+            overrides["env_kwargs"] = json.loads(args.env_kwargs)
+        train(args.env, make_config(**overrides), steps=args.steps, seed=args.seed, out=args.out,
+              progress=not args.no_progress, dump_params=args.dump_params, command=launch_command(argv))
+    except (UnknownEnvironmentError, CheckpointError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if int(os.environ.get("RANK", 0)) == 0:
+        print(f"Done: DPPO on {args.env}, {args.steps} steps, seed {args.seed} -> {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
