@@ -15,6 +15,7 @@ One idea per module (see the design card in the README):
 - :mod:`rlcore.noise`      Gaussian, Ornstein-Uhlenbeck and adaptive parameter noise
 - :mod:`rlcore.tabular`    tabular Q-learning and SARSA, value iteration
 - :mod:`rlcore.dqn`        DQN with Double, Dueling and Prioritized switches
+- :mod:`rlcore.a2c`        A2C, synchronous advantage actor-critic
 - :mod:`rlcore.ddpg`       DDPG
 - :mod:`rlcore.ppo`        PPO, clipped and adaptive-KL
 - :mod:`rlcore.experiments` the book's named, resumable full-budget experiments

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import signal
 import sys
 import typing
@@ -73,6 +74,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.env_kwargs:
         overrides["env_kwargs"] = json.loads(args.env_kwargs)
     config = module.make_config(args.algo, **overrides)
+    import torch
+
+    # the book's networks are small: one thread is fastest, and several runs can share the cores (as `experiments`)
+    torch.set_num_threads(int(os.environ.get("RLCORE_TORCH_THREADS", "1")))
     try:
         module.train(args.env, config, steps=args.steps, seed=args.seed, out=args.out,
                      progress=not args.no_progress)

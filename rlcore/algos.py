@@ -20,6 +20,7 @@ ALGORITHMS: dict[str, str] = {
     "q-learning": "rlcore.tabular",
     "sarsa": "rlcore.tabular",
     "dqn": "rlcore.dqn",
+    "a2c": "rlcore.a2c",
     "ppo": "rlcore.ppo",
     "ddpg": "rlcore.ddpg",
 }
