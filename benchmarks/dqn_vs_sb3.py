@@ -4,7 +4,8 @@
     python benchmarks/dqn_vs_sb3.py --steps 50000 --repeats 2
 
 Both train from scratch in this one process, one after the other (alternating over ``--repeats``),
-with one torch thread each, no evaluation and no logging during training. The figure is
+with one torch thread each, no evaluation and no logging during training, each timed from building its
+environment and model to the end of training, after the process's one-time costs are paid. The figure is
 environment steps per second of training wall time; the verdict is the ratio of medians.
 """
 
@@ -33,6 +34,7 @@ def sb3_dqn(env_id: str, steps: int, seed: int, cfg: dict) -> float:
     import gymnasium as gym
     from stable_baselines3 import DQN
 
+    start = time.perf_counter()  # like rlcore's, SB3's time includes building the environment and the model
     model = DQN(
         "MlpPolicy", gym.make(env_id), seed=seed, verbose=0, device="cpu",
         learning_rate=cfg["learning_rate"], buffer_size=cfg["buffer_size"], learning_starts=cfg["learning_starts"],
@@ -42,7 +44,6 @@ def sb3_dqn(env_id: str, steps: int, seed: int, cfg: dict) -> float:
         exploration_final_eps=cfg["epsilon_end"], max_grad_norm=cfg["max_grad_norm"],
         policy_kwargs={"net_arch": list(cfg["hidden"])},
     )
-    start = time.perf_counter()
     model.learn(total_timesteps=steps)
     return time.perf_counter() - start
 
@@ -63,6 +64,9 @@ def main() -> None:
     cfg = {k: getattr(d, k) for k in ("learning_rate", "buffer_size", "learning_starts", "batch_size", "gamma",
                                        "train_freq", "gradient_steps", "target_update_interval",
                                        "exploration_fraction", "epsilon_start", "epsilon_end", "max_grad_norm", "hidden")}
+    from ppo_vs_sb3 import warm_up  # the same one-time costs paid before any timing (this folder is on sys.path)
+
+    warm_up(args.env)
     times: dict[str, list[float]] = {"rlcore": [], "sb3": []}
     for r in range(args.repeats):
         for name, fn in (("rlcore", rlcore_dqn), ("sb3", sb3_dqn)):
