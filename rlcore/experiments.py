@@ -148,6 +148,34 @@ def _ddpg_report() -> Experiment:
     )
 
 
+# The report's DDPG comparisons (section 4.2) around the Table 1-3 settings of `ddpg-report`, which is each
+# comparison's reference run. The report names its HalfCheetah batch sizes and Hopper network sizes only as
+# v1/v2/v3; the values below are ours: one smaller and one larger than the table's.
+REPORT_DDPG_SWEEPS: dict[str, tuple[str, dict[str, Any], str]] = {
+    # run name: (env, what differs from the report's table, label)
+    "ant-no-explore": ("Ant-v5", {"exploration": "none"}, "no exploration noise (the report's 'DDPG')"),
+    "halfcheetah-batch16": ("HalfCheetah-v5", {"batch_size": 16}, "batch size 16"),
+    "halfcheetah-batch256": ("HalfCheetah-v5", {"batch_size": 256}, "batch size 256"),
+    "hopper-hidden128": ("Hopper-v5", {"hidden": (128,)}, "one hidden layer of 128"),
+    "hopper-hidden2048": ("Hopper-v5", {"hidden": (2048,)}, "one hidden layer of 2048"),
+}
+
+
+def _ddpg_report_sweeps() -> Experiment:
+    seeds = (0, 1, 2)
+    runs = []
+    for name, (env, change, label) in REPORT_DDPG_SWEEPS.items():
+        steps, hp = REPORT_DDPG[env]
+        runs.append(RunSpec(name, "ddpg", env, steps, seeds, {**_REPORT_DDPG_COMMON, **hp, **change},
+                            f"DDPG on {env}, the report's settings but {label}"))
+    return Experiment(
+        "ddpg-report-sweeps",
+        "The report's DDPG comparisons: Ant without exploration, HalfCheetah batch sizes 16 and 256, Hopper hidden "
+        "layers of 128 and 2048 (the reference runs are ddpg-report's); the report's budgets, 3 seeds",
+        tuple(runs),
+    )
+
+
 # The course report's PPO settings for Hopper (its Table 6), in rlcore's names: memory-batch 128 = n_steps (one
 # full-batch gradient step per update step, so batch_size = n_steps), action/critic-update-steps 20 = n_epochs,
 # lam 0.98 = the initial KL coefficient, epoch x step-per-epoch = 50 x 1000 steps. Its algorithm box uses
@@ -183,6 +211,7 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "dqn-lunarlander": _dqn_lunarlander,
     "ppo-mujoco": _ppo_mujoco,
     "ddpg-report": _ddpg_report,
+    "ddpg-report-sweeps": _ddpg_report_sweeps,
     "ppo-report-hopper": _ppo_report_hopper,
 }
 
