@@ -176,6 +176,20 @@ def _ddpg_report_sweeps() -> Experiment:
     )
 
 
+# "Modern" DDPG settings, rlcore.ddpg.Config's defaults (two 256-unit layers, batch 256, tau 0.005, both step sizes
+# 1e-3, constant Gaussian noise 0.1, 10k random steps first), at the report's HalfCheetah budget, beside ddpg-report.
+MODERN_DDPG: dict[str, Any] = {"eval_every": 10_000, "eval_episodes": 5, "checkpoint_every": 50_000}
+
+
+def _ddpg_modern() -> Experiment:
+    return Experiment(
+        "ddpg-modern",
+        "DDPG with modern settings (rlcore.ddpg.Config's defaults) on HalfCheetah-v5 at the report's 200k budget, 3 seeds",
+        (RunSpec("halfcheetah", "ddpg", "HalfCheetah-v5", REPORT_DDPG["HalfCheetah-v5"][0], (0, 1, 2), MODERN_DDPG,
+                 "DDPG on HalfCheetah-v5, modern settings"),),
+    )
+
+
 # The course report's PPO settings for Hopper (its Table 6), in rlcore's names: memory-batch 128 = n_steps (one
 # full-batch gradient step per update step, so batch_size = n_steps), action/critic-update-steps 20 = n_epochs,
 # lam 0.98 = the initial KL coefficient, epoch x step-per-epoch = 50 x 1000 steps. Its algorithm box uses
@@ -212,6 +226,7 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "ppo-mujoco": _ppo_mujoco,
     "ddpg-report": _ddpg_report,
     "ddpg-report-sweeps": _ddpg_report_sweeps,
+    "ddpg-modern": _ddpg_modern,
     "ppo-report-hopper": _ppo_report_hopper,
 }
 
