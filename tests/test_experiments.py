@@ -93,3 +93,23 @@ def test_report_metric_sums_rewards_per_epoch_over_the_last_epochs():
     assert report_metric(log, epoch_steps=2000, last=20) == 16.5  # only two epochs exist: (3 + 30) / 2
     with pytest.raises(ValueError, match="less than one epoch"):
         report_metric(log, epoch_steps=10_000)
+
+
+def test_ddpg_sweep_arms_change_one_setting_of_the_report_table():
+    """Each arm of ddpg-report-sweeps is its ddpg-report run with only the setting its name says."""
+    from rlcore.ddpg import Config
+
+    base = {spec.env_id: spec for spec in ex.get_experiment("ddpg-report").runs}
+    expected = {"ant-no-explore": {"exploration"}, "halfcheetah-batch16": {"batch_size"},
+                "halfcheetah-batch256": {"batch_size"}, "hopper-hidden128": {"hidden"},
+                "hopper-hidden2048": {"hidden"}}
+    arms = ex.get_experiment("ddpg-report-sweeps").runs
+    assert {arm.name for arm in arms} == set(expected)
+    for arm in arms:
+        ref = base[arm.env_id]
+        a, b = Config(**arm.overrides), Config(**ref.overrides)
+        changed = {f for f in Config.__dataclass_fields__ if getattr(a, f) != getattr(b, f)}
+        assert changed == expected[arm.name], (arm.name, changed)
+        assert (arm.steps, arm.seeds, arm.algo) == (ref.steps, ref.seeds, "ddpg")
+    modern = ex.get_experiment("ddpg-modern").runs[0]
+    assert Config(**modern.overrides).hidden == Config().hidden and modern.steps == base["HalfCheetah-v5"].steps
