@@ -122,6 +122,23 @@ def _ppo_mujoco() -> Experiment:
     )
 
 
+def _ppo_mujoco_1m() -> Experiment:
+    # the reference budget (1M steps, RL Zoo's numbers) and 5 seeds; on Hopper also rlcore's defaults (the PPO
+    # paper's MuJoCo settings: 64x64 tanh, 2048-step rollouts, 10 epochs, log std 0), which explore more
+    seeds = (0, 1, 2, 3, 4)
+    evals = {"eval_every": 20_000, "eval_episodes": 5, "checkpoint_every": 50_000}
+    runs = [RunSpec(env.split("-")[0].lower(), "ppo", env, 1_000_000, seeds, {**hp, **_ZOO_PPO_NET, **evals},
+                    f"PPO-clip on {env}, RL-Zoo settings") for env, hp in ZOO_PPO.items()]
+    runs.append(RunSpec("hopper-paper", "ppo", "Hopper-v5", 1_000_000, seeds, evals,
+                        "PPO-clip on Hopper-v5, the PPO paper's settings (rlcore's defaults)"))
+    return Experiment(
+        "ppo-mujoco-1m",
+        "PPO (clipped) at the reference budget: HalfCheetah-v5 and Hopper-v5 with RL-Zoo's settings, Hopper-v5 "
+        "also with the PPO paper's; 1M steps, 5 seeds",
+        tuple(runs),
+    )
+
+
 # The course report's DDPG settings (its Tables 1-3), in rlcore's names. The report does not give the
 # initial scale of its decaying Gaussian exploration noise; rlcore uses 0.3 of the action half-range.
 REPORT_DDPG: dict[str, tuple[int, dict[str, Any]]] = {
@@ -224,6 +241,7 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "dqn-cartpole": _dqn_cartpole,
     "dqn-lunarlander": _dqn_lunarlander,
     "ppo-mujoco": _ppo_mujoco,
+    "ppo-mujoco-1m": _ppo_mujoco_1m,
     "ddpg-report": _ddpg_report,
     "ddpg-report-sweeps": _ddpg_report_sweeps,
     "ddpg-modern": _ddpg_modern,
