@@ -7,6 +7,11 @@ the workers (gloo, on the CPU) before the optimizer step, and all workers hold t
 After each rollout the workers merge their observation (and return) normalization statistics, and the
 adaptive-KL coefficient reads the KL averaged over the workers: the workers, and the saved policy, agree.
 
+``--set share=rollouts`` exchanges data instead of gradients: once per update the workers all-gather their
+rollouts and each takes the same minibatch steps on all of them, with no communication per gradient step
+(:attr:`Config.share`). The learning is the same in distribution; the communication is one message per
+update instead of one per minibatch, paid for by computing every gradient step on every worker.
+
 One machine, 2 workers (``--steps`` is the total over all workers)::
 
     torchrun --nproc_per_node 2 -m rlcore.dppo --env HalfCheetah-v5 --steps 1000000 --out runs/dppo-hc
@@ -94,6 +99,20 @@ class Config(ppo.Config):
 
     checkpoint_updates: int = 1
     """Write checkpoint.pt every this many updates (and at the end); a restarted job redoes at most this many."""
+    share: str = "gradients"
+    """What the workers exchange. ``"gradients"``: every minibatch's gradient is averaged by
+    ``DistributedDataParallel`` (one all-reduce per gradient step). ``"rollouts"``: the workers gather each
+    other's rollouts once per update and every worker takes the same minibatch steps on all of them (one
+    all-gather per update; rank 0's weights are broadcast after it). Both learn from minibatches of
+    ``world_size * batch_size`` of all workers' transitions; the second computes every step on every worker."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.share not in SHARES:
+            raise ValueError(f"share must be one of {SHARES}, got {self.share!r}")
+
+
+SHARES = ("gradients", "rollouts")
 
 
 def make_config(algo: str = "dppo", **overrides: Any) -> Config:
@@ -167,6 +186,20 @@ def merge_contributions(base: tuple[np.ndarray, np.ndarray, float],
 
 def snapshot(rms) -> tuple[np.ndarray, np.ndarray, float]:
     return np.array(rms.mean, copy=True), np.array(rms.var, copy=True), float(rms.count)
+
+
+def gather_rollouts(batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Every worker's :func:`rlcore.ppo.rollout_batch`, concatenated in rank order, on every worker."""
+    parts: list[Any] = [None] * dist.get_world_size()
+    dist.all_gather_object(parts, batch)
+    return {k: torch.cat([p[k] for p in parts]) for k in batch}
+
+
+def broadcast_weights(model: torch.nn.Module) -> None:
+    """Rank 0's parameters on every rank (one broadcast of all of them as a single vector)."""
+    vec = torch.nn.utils.parameters_to_vector(model.parameters()).detach()
+    dist.broadcast(vec, src=0)
+    torch.nn.utils.vector_to_parameters(vec, model.parameters())
 
 
 def _broadcast(obj: Any) -> Any:
@@ -269,7 +302,7 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
         rng = np.random.default_rng(ss)
         torch.manual_seed(int(ss.generate_state(1)[0]))
         reset_seed = int(ss.generate_state(2)[1])
-    model = DistributedDataParallel(agent)
+    model = DistributedDataParallel(agent) if config.share == "gradients" else agent
     obs_base = snapshot(obs_norm.obs_rms) if obs_norm is not None else None
     ret_base = snapshot(rew_norm.return_rms) if rew_norm is not None else None
 
@@ -327,11 +360,18 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
                 if rew_norm is not None:
                     ret_base = sync_running_stats(rew_norm.return_rms, ret_base)
             step += per_update
-            # 2. advantages; 3. minibatch steps with gradients averaged by DDP (the same number on every worker)
+            # 2. advantages; 3. minibatch steps (the same number on every worker), either with gradients
+            # averaged by DDP, or on all workers' rollouts, gathered, with the same shuffling everywhere
             batch = rollout_batch(buf, config)
             n_batches = torch.tensor(max(len(batch["obs"]) // config.batch_size, 1))
             dist.all_reduce(n_batches, op=dist.ReduceOp.MIN)
-            stats, mean_kl = ppo_update(model, optimizer, batch, config, kl_coef, rng, int(n_batches))
+            if config.share == "gradients":
+                stats, mean_kl = ppo_update(model, optimizer, batch, config, kl_coef, rng, int(n_batches))
+            else:
+                update_rng = np.random.default_rng([seed, iteration])
+                stats, mean_kl = ppo_update(model, optimizer, gather_rollouts(batch), config, kl_coef, update_rng,
+                                            int(n_batches))
+                broadcast_weights(agent)  # identical already on identical machines; exact on mixed ones too
             # the workers' means: the KL for beta's rule (so beta stays the same everywhere), the logged numbers
             summary = torch.tensor([*np.mean(stats, axis=0), mean_kl, sum(new_returns), len(new_returns)],
                                    dtype=torch.float64)
