@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import time
@@ -67,6 +68,7 @@ def main() -> None:
     from ppo_vs_sb3 import warm_up  # the same one-time costs paid before any timing (this folder is on sys.path)
 
     warm_up(args.env)
+    load_start = os.getloadavg()
     times: dict[str, list[float]] = {"rlcore": [], "sb3": []}
     for r in range(args.repeats):
         for name, fn in (("rlcore", rlcore_dqn), ("sb3", sb3_dqn)):
@@ -90,7 +92,8 @@ def main() -> None:
         "versions": {"rlcore": rlcore.__version__, "stable_baselines3": stable_baselines3.__version__,
                      "torch": torch.__version__, "gymnasium": gymnasium.__version__, "python": platform.python_version()},
         "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                    "torch_threads": torch.get_num_threads()},
+                    "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(),
+                    "loadavg_start": list(load_start), "loadavg_end": list(os.getloadavg())},
         "commit": git_commit(),
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

@@ -505,6 +505,16 @@ def seeds_table(run: RunResults, threshold: float) -> list[dict[str, Any]]:
     return rows
 
 
+def scaling_rows(record: dict[str, Any]) -> list[dict[str, Any]]:
+    """One table row per run of ``benchmarks/dppo_scaling.py``'s record (rates in env-steps/s, times per update)."""
+    return [{"workers": r["workers"], "sharing": r.get("share", "gradients") if r["workers"] > 1 else "(nothing)",
+             "env-steps/s (training)": r["env_steps_per_second"], "ratio to 1 worker": f"{r['ratio_to_1_worker']:.2f}×",
+             "env-steps/s incl. start-up": r["env_steps_per_second_wall"],
+             "rollout s / update": f"{r['rollout_seconds_per_update']:.3f}",
+             "learning + sync s / update": f"{r['update_seconds_per_update'] - r['rollout_seconds_per_update']:.3f}"}
+            for r in record["results"]]
+
+
 def markdown_table(rows: list[dict[str, Any]], headers: dict[str, str] | None = None) -> str:
     """A list of dicts as a Markdown table (``headers`` renames columns; None cells show as —)."""
     if not rows:

@@ -94,3 +94,33 @@ def plot_learning_curves(
     ax.grid(alpha=0.3)
     ax.legend()
     return ax
+
+
+def plot_scaling(record: Mapping, axes=None):
+    """Two panels from ``benchmarks/dppo_scaling.py``'s record: speed-up against workers per way of sharing
+    (with the linear ideal), and each run's training return against all workers' env-steps. Returns the axes."""
+    import matplotlib.pyplot as plt
+
+    if axes is None:
+        _, axes = plt.subplots(1, 2, figsize=(10, 3.4))
+    results = record["results"]
+    single = [r for r in results if r["workers"] == 1]
+    for share in dict.fromkeys(r.get("share", "gradients") for r in results if r["workers"] > 1):
+        rs = single + [r for r in results if r["workers"] > 1 and r.get("share", "gradients") == share]
+        axes[0].plot([r["workers"] for r in rs], [r["ratio_to_1_worker"] for r in rs], "o-",
+                     label=f"sharing {share}")
+    workers = sorted({r["workers"] for r in results})
+    axes[0].plot(workers, workers, "--", color="0.5", label="linear")
+    axes[0].set(xlabel="workers", ylabel="speed-up (env-steps/s)", xticks=workers, title="throughput")
+    axes[0].legend()
+    for r in results:
+        if r.get("curve") and r["curve"]["step"]:
+            label = "1 worker" if r["workers"] == 1 else f"{r['workers']} workers, sharing {r.get('share', 'gradients')}"
+            axes[1].plot(r["curve"]["step"], r["curve"]["episode_return"], ".-", label=label)
+    axes[1].set(xlabel="environment steps (all workers)", ylabel="training episode return",
+                title="return per env-step")
+    if axes[1].has_data():
+        axes[1].legend()
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    return axes

@@ -173,3 +173,41 @@ def test_half_a_torchrun_environment_is_a_clear_error(monkeypatch):
     monkeypatch.delenv("MASTER_ADDR", raising=False)
     with pytest.raises(ValueError, match="MASTER_ADDR.*torchrun --nproc_per_node"):
         dppo.init_distributed()
+
+
+def test_sharing_rollouts_keeps_the_workers_identical(tmp_path):
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--standalone",
+           "-m", "rlcore.dppo", "--env", "Pendulum-v1", "--steps", str(4 * PER_UPDATE), "--seed", "1", "--out", str(out),
+           "--no-progress", "--dump-params", str(out / "dump"), *TINY, "--set", "share=rollouts"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert done.returncode == 0, done.stdout + done.stderr
+    r0, r1 = load_checkpoint(out / "dump" / "rank0.pt"), load_checkpoint(out / "dump" / "rank1.pt")
+    assert r0["step"] == 4 * PER_UPDATE and r0["iteration"] == 4
+    for key in ("agent", "optimizer", "kl_coef", "obs_mean", "obs_var", "obs_count"):
+        assert _same(r0[key], r1[key]), key
+    assert r0["optimizer"]["state"], "the optimizer took steps"
+    assert load_checkpoint(out / "checkpoint.pt")["config"]["share"] == "rollouts"
+
+
+def _gather_worker(rank: int, store_file: str, out_dir: str) -> None:
+    torch.distributed.init_process_group("gloo", init_method=f"file://{store_file}", rank=rank, world_size=2)
+    n = 3 + 2 * rank  # the workers' rollouts differ in length (reset steps are dropped)
+    mine = {"obs": torch.full((n, 2), float(rank)), "adv": torch.arange(n, dtype=torch.float32) + 10 * rank}
+    merged = dppo.gather_rollouts(mine)
+    torch.save(merged, Path(out_dir) / f"rank{rank}.pt")
+    torch.distributed.destroy_process_group()
+
+
+def test_gather_rollouts_concatenates_every_worker_in_rank_order(tmp_path):
+    torch.multiprocessing.spawn(_gather_worker, args=(str(tmp_path / "store"), str(tmp_path)), nprocs=2)
+    for rank in (0, 1):
+        merged = torch.load(tmp_path / f"rank{rank}.pt", weights_only=True)
+        assert merged["obs"].shape == (8, 2)
+        assert merged["obs"][:3].eq(0).all() and merged["obs"][3:].eq(1).all()
+        assert merged["adv"].tolist() == [0, 1, 2, 10, 11, 12, 13, 14]
+
+
+def test_an_unknown_way_of_sharing_is_a_clear_error():
+    with pytest.raises(ValueError, match="share must be one of"):
+        dppo.Config(share="weights")

@@ -113,3 +113,10 @@ def test_ddpg_sweep_arms_change_one_setting_of_the_report_table():
         assert (arm.steps, arm.seeds, arm.algo) == (ref.steps, ref.seeds, "ddpg")
     modern = ex.get_experiment("ddpg-modern").runs[0]
     assert Config(**modern.overrides).hidden == Config().hidden and modern.steps == base["HalfCheetah-v5"].steps
+
+
+def test_scaling_rows_split_each_update_into_rollout_and_the_rest(scaling_record):
+    rows = ex.scaling_rows(scaling_record)
+    assert [(r["workers"], r["sharing"], r["ratio to 1 worker"]) for r in rows] == [
+        (1, "(nothing)", "1.00×"), (2, "gradients", "1.40×"), (2, "rollouts", "1.90×")]
+    assert rows[1]["learning + sync s / update"] == "0.400" and rows[2]["rollout s / update"] == "0.300"

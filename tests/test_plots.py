@@ -42,3 +42,14 @@ def test_plot_draws_one_line_and_band_per_label():
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert labels == ["a (2 seeds)", "b (1 seed)"]
     np.testing.assert_allclose(ax.lines[0].get_ydata()[-1], 13.5)  # mean of 9 and 18
+
+
+def test_plot_scaling_draws_one_speed_up_line_per_way_of_sharing_and_the_learning_curves(scaling_record):
+    from rlcore.plots import plot_scaling
+
+    speed, curves = plot_scaling(scaling_record)
+    lines = {line.get_label(): line for line in speed.get_lines()}
+    assert set(lines) == {"sharing gradients", "sharing rollouts", "linear"}
+    np.testing.assert_allclose(lines["sharing rollouts"].get_xydata(), [[1, 1.0], [2, 1.9]])
+    np.testing.assert_allclose(lines["linear"].get_xydata(), [[1, 1], [2, 2]])
+    assert [line.get_label() for line in curves.get_lines()] == ["1 worker", "2 workers, sharing gradients"]

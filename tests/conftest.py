@@ -1,0 +1,19 @@
+"""Shared test fixtures."""
+
+import pytest
+
+
+@pytest.fixture
+def scaling_record():
+    """A small record in the format of benchmarks/dppo_scaling.py."""
+    return {"results": [
+        {"workers": 1, "share": "gradients", "ratio_to_1_worker": 1.0, "env_steps_per_second": 100.0,
+         "env_steps_per_second_wall": 80.0, "rollout_seconds_per_update": 0.3, "update_seconds_per_update": 0.5,
+         "curve": {"step": [10, 20], "episode_return": [1.0, 2.0]}},
+        {"workers": 2, "share": "gradients", "ratio_to_1_worker": 1.4, "env_steps_per_second": 140.0,
+         "env_steps_per_second_wall": 100.0, "rollout_seconds_per_update": 0.3, "update_seconds_per_update": 0.7,
+         "curve": {"step": [20, 40], "episode_return": [1.0, 3.0]}},
+        {"workers": 2, "share": "rollouts", "ratio_to_1_worker": 1.9, "env_steps_per_second": 190.0,
+         "env_steps_per_second_wall": 120.0, "rollout_seconds_per_update": 0.3, "update_seconds_per_update": 0.52,
+         "curve": {"step": [], "episode_return": []}},
+    ]}
