@@ -1,6 +1,6 @@
 """Throughput of data-parallel PPO (:mod:`rlcore.dppo`) with 1, 2, ... workers on one machine.
 
-    python benchmarks/dppo_scaling.py --env HalfCheetah-v5 --steps 20000 --max-workers 2
+    python benchmarks/dppo_scaling.py --env HalfCheetah-v5 --steps 200000 --max-workers 2
 
 Each worker count trains from scratch for the same total budget in its own ``torchrun --standalone`` job
 (one torch thread per worker, no evaluation, a checkpoint after every update as by default). Every worker
@@ -66,7 +66,7 @@ def run_workers(n: int, args: argparse.Namespace, folder: Path, share: str = "gr
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--env", default="HalfCheetah-v5")
-    p.add_argument("--steps", type=int, default=20_000, help="total env steps of every run")
+    p.add_argument("--steps", type=int, default=200_000, help="total env steps of every run (enough to see HalfCheetah start to learn)")
     p.add_argument("--max-workers", type=int, default=2)
     p.add_argument("--n-steps", type=int, default=1024, help="transitions per worker per update")
     p.add_argument("--num-envs", type=int, default=1, help="environments per worker")
