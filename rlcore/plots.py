@@ -100,6 +100,7 @@ def plot_scaling(record: Mapping, axes=None):
     """Two panels from ``benchmarks/dppo_scaling.py``'s record: speed-up against workers per way of sharing
     (with the linear ideal), and each run's training return against all workers' env-steps. Returns the axes."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
     if axes is None:
         _, axes = plt.subplots(1, 2, figsize=(10, 3.4))
@@ -118,7 +119,8 @@ def plot_scaling(record: Mapping, axes=None):
             label = "1 worker" if r["workers"] == 1 else f"{r['workers']} workers, sharing {r.get('share', 'gradients')}"
             axes[1].plot(r["curve"]["step"], r["curve"]["episode_return"], ".-", label=label)
     axes[1].set(xlabel="environment steps (all workers)", ylabel="training episode return",
-                title="return per env-step")
+                title="return per env-step (one seed each)")
+    axes[1].xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e3:g}k" if x else "0"))
     if axes[1].has_data():
         axes[1].legend()
     for ax in axes:
