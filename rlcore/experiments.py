@@ -516,7 +516,9 @@ def scaling_rows(record: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def markdown_table(rows: list[dict[str, Any]], headers: dict[str, str] | None = None) -> str:
-    """A list of dicts as a Markdown table (``headers`` renames columns; None cells show as —)."""
+    """A list of dicts as a Markdown table (``headers`` renames columns; None cells show as —).
+
+    Floats of 100 or more get one decimal and thousands separators, smaller ones 4 significant digits."""
     if not rows:
         return "_(no rows)_"
     keys = list(headers or rows[0])
@@ -525,8 +527,8 @@ def markdown_table(rows: list[dict[str, Any]], headers: dict[str, str] | None = 
     def cell(v: Any) -> str:
         if v is None:
             return "—"
-        if isinstance(v, float):
-            return f"{v:,.1f}"
+        if isinstance(v, float):  # one decimal for returns and rates; small settings (3e-4, 0.99) in full
+            return f"{v:,.1f}" if abs(v) >= 100 else f"{v:.4g}"
         return str(v)
 
     lines = ["| " + " | ".join(names) + " |", "|" + "|".join("---" for _ in keys) + "|"]

@@ -62,6 +62,8 @@ def test_first_step_reaching_and_tables():
     md = ex.markdown_table(rows, {"seed": "seed", "first_step_reaching": "first step ≥ 475"})
     assert md.splitlines() == ["| seed | first step ≥ 475 |", "|---|---|", "| 0 | 20 |"]
     assert "—" in ex.markdown_table([{"a": None}])
+    small = ex.markdown_table([{"lr": 3e-4, "gamma": 0.99, "ret": 2315.84, "low": 1 / 3}])
+    assert small.splitlines()[-1] == "| 0.0003 | 0.99 | 2,315.8 | 0.3333 |"
 
 
 def test_load_or_train_falls_back_to_a_live_run_and_says_so(tiny, tmp_path):
