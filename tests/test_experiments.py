@@ -122,3 +122,15 @@ def test_scaling_rows_split_each_update_into_rollout_and_the_rest(scaling_record
     assert [(r["workers"], r["sharing"], r["ratio to 1 worker"]) for r in rows] == [
         (1, "(nothing)", "1.00×"), (2, "gradients", "1.40×"), (2, "rollouts", "1.90×")]
     assert rows[1]["learning + sync s / update"] == "0.400" and rows[2]["rollout s / update"] == "0.300"
+
+
+def test_ppo_report_halfcheetah_is_the_two_by_two_of_memory_batch_and_update_steps():
+    runs = ex.get_experiment("ppo-report-halfcheetah").runs
+    combos = set()
+    for run in runs:
+        changed = {k for k, v in run.overrides.items() if ex.REPORT_PPO_HALFCHEETAH[k] != v}
+        assert changed <= {"n_steps", "batch_size", "n_epochs"}, (run.name, changed)
+        assert run.overrides["n_steps"] == run.overrides["batch_size"]  # one full-batch step per update step
+        combos.add((run.overrides["n_steps"], run.overrides["n_epochs"]))
+    assert combos == {(128, 20), (1024, 20), (128, 5), (1024, 5)}
+    assert all(r.steps == 50 * 5_000 and len(r.seeds) >= 3 for r in runs)  # the report's 50 epochs of 5000 steps
