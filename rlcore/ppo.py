@@ -101,6 +101,12 @@ class Config:
     """Orthogonal initialization with a small last policy layer; False keeps PyTorch's default init."""
     log_std_init: float = 0.0
     """Initial log standard deviation of the Gaussian policy (continuous actions)."""
+    explore_noise: float = 0.0
+    """Extra Gaussian noise added to the policy's sampled actions, its standard deviation in action units (0: none)
+    [use-explore]. The noisy action is what is stored and learned from, as in the report; the policy then no
+    longer samples its own data exactly, so PPO's ratio is only approximately right."""
+    explore_decay: float = 1.0
+    """The extra noise's standard deviation is ``explore_noise * explore_decay ** step`` [explore-decay]."""
     eval_every: int = 10_000
     """Evaluate the deterministic policy after the first iteration past every this many steps (0: never)."""
     eval_episodes: int = 5
@@ -118,6 +124,8 @@ class Config:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
         if self.batch_size > self.n_steps * self.num_envs:
             raise ValueError("batch_size must be <= n_steps * num_envs")
+        if self.explore_noise < 0 or not 0 < self.explore_decay <= 1:
+            raise ValueError("explore_noise must be >= 0 and explore_decay in (0, 1]")
 
 
 # --- the objective, one small function each ----------------------------------------------------
@@ -290,10 +298,12 @@ class Rollout:
 
 
 def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndarray, buf: Rollout,
-                    on_episode=None) -> np.ndarray:
+                    on_episode=None, explore_noise: float = 0.0) -> np.ndarray:
     """Run the policy for ``n_steps`` steps in each environment, filling ``buf``; returns the next observation.
 
     ``on_episode(t, episode_return, episode_length)`` is called for every episode that ends at rollout step t.
+    ``explore_noise``: the standard deviation of extra Gaussian noise on each sampled (continuous) action; the
+    noisy action and its log-probability under the policy are stored.
     """
     T = len(buf.obs)
     for t in range(T):
@@ -301,6 +311,8 @@ def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndar
             x = torch.as_tensor(obs, dtype=torch.float32)
             dist = agent.distribution(x)
             action = dist.sample()
+            if explore_noise:
+                action = action + explore_noise * torch.randn_like(action)
             buf.logp[t] = agent.log_prob(dist, action).numpy()
             buf.val[t] = agent.value(x).numpy()
         a = action.numpy()
@@ -405,6 +417,9 @@ def train(
     rng = np.random.default_rng(seed)
     envs = make_envs(env_id, config, seed)
     spaces = check_spaces(envs, env_id)
+    if config.explore_noise and spaces["discrete"]:
+        raise ValueError(f"explore_noise adds Gaussian noise to continuous actions; {env_id} has discrete ones "
+                         "(set explore_noise=0).")
     agent = make_agent(spaces, config)
     optimizer = make_optimizer(agent, config)
     obs_norm = _find(envs, gym.wrappers.vector.NormalizeObservation)
@@ -483,7 +498,7 @@ def train(
             for g in optimizer.param_groups:
                 g["lr"] = lr
             # 1. run the policy for T steps in each environment
-            obs = collect_rollout(agent, envs, obs, buf, on_episode)
+            obs = collect_rollout(agent, envs, obs, buf, on_episode, config.explore_noise * config.explore_decay ** step)
             step += per_iter
             # 2. advantages, 3. n_epochs passes of minibatch gradient steps
             stats, mean_kl = ppo_update(agent, optimizer, rollout_batch(buf, config), config, kl_coef, rng)

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 import torch
 
+from rlcore import ppo
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.ppo import (
@@ -135,3 +136,27 @@ def test_resume_drops_log_rows_written_after_the_checkpoint_and_records_itself(t
     assert np.all(np.diff(steps) >= 0)  # (parallel environments can finish episodes at the same step)
     meta = json.loads((tmp_path / "meta.json").read_text())
     assert [r["step"] for r in meta["resumes"]] == [512]
+
+
+def test_explore_noise_widens_the_stored_actions_and_stores_their_log_probability():
+    torch.manual_seed(0)
+    config = Config(n_steps=400, batch_size=400, normalize_obs=False, normalize_reward=False)
+    envs = ppo.make_envs("Pendulum-v1", config, seed=0)
+    spaces = ppo.check_spaces(envs, "Pendulum-v1")
+    agent = ppo.make_agent(spaces, config)
+    with torch.no_grad():
+        agent.log_std.fill_(-5.0)  # the policy itself barely explores: std 0.007
+    spread = {}
+    for noise in (0.0, 0.5):
+        buf = ppo.Rollout(spaces, config)
+        obs, _ = envs.reset(seed=0)
+        ppo.collect_rollout(agent, envs, obs, buf, explore_noise=noise)
+        x = torch.as_tensor(buf.obs.reshape(400, -1))
+        with torch.no_grad():
+            mean = agent.actor(x)
+            logp = agent.log_prob(agent.distribution(x), torch.as_tensor(buf.act.reshape(400, -1)))
+        spread[noise] = float((torch.as_tensor(buf.act.reshape(400, -1)) - mean).std())
+        np.testing.assert_allclose(buf.logp.reshape(-1), logp.numpy(), rtol=1e-4, atol=1e-3)
+    assert spread[0.0] < 0.02 and 0.4 < spread[0.5] < 0.6, spread
+    with pytest.raises(ValueError, match="discrete"):
+        train("CartPole-v1", Config(explore_noise=0.1, n_steps=64, batch_size=64), steps=64)
