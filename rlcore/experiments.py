@@ -540,6 +540,16 @@ def seeds_table(run: RunResults, threshold: float) -> list[dict[str, Any]]:
     return rows
 
 
+def gap_and_spread(finals: dict[str, np.ndarray]) -> tuple[str, str, float, float]:
+    """Per-seed final returns by arm -> (best arm, worst arm, gap between their means, largest std within an arm).
+
+    A gap under twice the spread is not a ranking with a handful of seeds: the chapters say so when it is.
+    """
+    means = {arm: float(np.mean(f)) for arm, f in finals.items()}
+    best, worst = max(means, key=means.get), min(means, key=means.get)
+    return best, worst, means[best] - means[worst], max(float(np.std(f)) for f in finals.values())
+
+
 def scaling_rows(record: dict[str, Any]) -> list[dict[str, Any]]:
     """One table row per run of ``benchmarks/dppo_scaling.py``'s record (rates in env-steps/s, times per update)."""
     return [{"workers": r["workers"], "sharing": r.get("share", "gradients") if r["workers"] > 1 else "(nothing)",

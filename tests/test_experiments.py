@@ -134,3 +134,11 @@ def test_ppo_report_halfcheetah_is_the_two_by_two_of_memory_batch_and_update_ste
         combos.add((run.overrides["n_steps"], run.overrides["n_epochs"]))
     assert combos == {(128, 20), (1024, 20), (128, 5), (1024, 5)}
     assert all(r.steps == 50 * 5_000 and len(r.seeds) >= 3 for r in runs)  # the report's 50 epochs of 5000 steps
+
+
+def test_gap_and_spread_names_the_best_and_worst_arm_and_the_widest_spread():
+    import numpy as np
+
+    best, worst, gap, spread = ex.gap_and_spread({"a": np.array([1.0, 3.0]), "b": np.array([10.0, 10.0]),
+                                                  "c": np.array([4.0, 8.0])})
+    assert (best, worst, gap, spread) == ("b", "a", 8.0, 2.0)
