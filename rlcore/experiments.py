@@ -131,10 +131,17 @@ def _ppo_mujoco_1m() -> Experiment:
                     f"PPO-clip on {env}, RL-Zoo settings") for env, hp in ZOO_PPO.items()]
     runs.append(RunSpec("hopper-paper", "ppo", "Hopper-v5", 1_000_000, seeds, evals,
                         "PPO-clip on Hopper-v5, the PPO paper's settings (rlcore's defaults)"))
+    # does exploration decide the standing plateau? each Hopper setting with the other's initial log std, 3 seeds
+    runs.append(RunSpec("hopper-zoo-logstd0", "ppo", "Hopper-v5", 1_000_000, seeds[:3],
+                        {**ZOO_PPO["Hopper-v5"], **_ZOO_PPO_NET, **evals, "log_std_init": 0.0},
+                        "PPO-clip on Hopper-v5, RL-Zoo settings but initial log std 0"))
+    runs.append(RunSpec("hopper-paper-logstd-2", "ppo", "Hopper-v5", 1_000_000, seeds[:3], {**evals, "log_std_init": -2.0},
+                        "PPO-clip on Hopper-v5, the PPO paper's settings but initial log std -2"))
     return Experiment(
         "ppo-mujoco-1m",
         "PPO (clipped) at the reference budget: HalfCheetah-v5 and Hopper-v5 with RL-Zoo's settings, Hopper-v5 "
-        "also with the PPO paper's; 1M steps, 5 seeds",
+        "also with the PPO paper's; 1M steps, 5 seeds; and the initial log std swapped between the Hopper settings, "
+        "3 seeds",
         tuple(runs),
     )
 
