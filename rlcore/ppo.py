@@ -247,7 +247,10 @@ class PPOPolicy:
 
 def check_spaces(env: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str, Any]:
     obs = getattr(env, "single_observation_space", env.observation_space)
-    act = getattr(env, "single_action_space", env.action_space)
+    # the action space of the environment itself: Gymnasium's ClipAction wrapper widens it to +-inf, and the
+    # deterministic policy must clip to the real bounds (MuJoCo's control costs count the unclipped action)
+    base = env.unwrapped
+    act = getattr(base, "single_action_space", base.action_space)
     if not isinstance(obs, gym.spaces.Box) or len(obs.shape) != 1:
         raise ValueError(f"rlcore's PPO takes flat vector observations, but {env_id} has {obs}.")
     if isinstance(act, gym.spaces.Discrete):
@@ -553,4 +556,9 @@ def load_policy(ckpt: dict[str, Any]) -> PPOPolicy:
     to_np = lambda t: None if t is None else t.numpy()  # noqa: E731
     low = np.array(sp["low"], dtype=np.float32) if "low" in sp else None
     high = np.array(sp["high"], dtype=np.float32) if "high" in sp else None
+    if low is not None and not (np.isfinite(low).all() and np.isfinite(high).all()) and "env_id" in ckpt:
+        # checkpoints written before the fix in check_spaces hold ClipAction's +-inf: ask the environment
+        env = gym.make(ckpt["env_id"], **config.env_kwargs)
+        low, high = env.action_space.low.astype(np.float32), env.action_space.high.astype(np.float32)
+        env.close()
     return PPOPolicy(agent, to_np(mean), to_np(var), float(ckpt.get("obs_clip", 10.0)), low, high)

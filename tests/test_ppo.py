@@ -160,3 +160,23 @@ def test_explore_noise_widens_the_stored_actions_and_stores_their_log_probabilit
     assert spread[0.0] < 0.02 and 0.4 < spread[0.5] < 0.6, spread
     with pytest.raises(ValueError, match="discrete"):
         train("CartPole-v1", Config(explore_noise=0.1, n_steps=64, batch_size=64), steps=64)
+
+
+def test_the_deterministic_policy_clips_to_the_environments_own_action_bounds(tmp_path):
+    import gymnasium as gym
+
+    from rlcore.checkpoint import load_checkpoint, save_checkpoint
+
+    config = Config(n_steps=64, batch_size=64, n_epochs=1, eval_every=0)
+    result = train("Pendulum-v1", config, steps=64, seed=0, out=tmp_path / "run")
+    assert list(result.policy.low) == [-2.0] and list(result.policy.high) == [2.0]  # not ClipAction's +-inf
+    ckpt = load_checkpoint(tmp_path / "run" / "checkpoint.pt")
+    assert ckpt["spaces"]["low"] == [-2.0]
+    with torch.no_grad():
+        result.agent.actor[-1].bias.fill_(50.0)  # a mean far outside the bounds
+    assert result.policy(np.zeros(3)).tolist() == [2.0]
+    # a checkpoint from before the fix, with infinite bounds, gets the environment's
+    ckpt["spaces"] = {**ckpt["spaces"], "low": [-np.inf], "high": [np.inf]}
+    save_checkpoint(tmp_path / "old.pt", ckpt)
+    policy = load_policy(load_checkpoint(tmp_path / "old.pt"))
+    assert policy.low.tolist() == gym.make("Pendulum-v1").action_space.low.tolist() == [-2.0]
