@@ -110,18 +110,6 @@ ZOO_PPO: dict[str, dict[str, Any]] = {
 _ZOO_PPO_NET = {"hidden": (256, 256), "activation": "relu", "ortho_init": False, "log_std_init": -2.0}
 
 
-def _ppo_mujoco() -> Experiment:
-    seeds = (0, 1, 2)
-    evals = {"eval_every": 20_000, "eval_episodes": 5, "checkpoint_every": 50_000}
-    return Experiment(
-        "ppo-mujoco",
-        "PPO (clipped) on HalfCheetah-v5 and Hopper-v5, 500k steps, RL-Zoo's tuned hyperparameters, 3 seeds",
-        tuple(RunSpec(env.split("-")[0].lower(), "ppo", env, 500_000, seeds,
-                      {**hp, **_ZOO_PPO_NET, **evals}, f"PPO-clip on {env}, RL-Zoo settings")
-              for env, hp in ZOO_PPO.items()),
-    )
-
-
 def _ppo_mujoco_1m() -> Experiment:
     # the reference budget (1M steps, RL Zoo's numbers) and 5 seeds; on Hopper also rlcore's defaults (the PPO
     # paper's MuJoCo settings: 64x64 tanh, 2048-step rollouts, 10 epochs, log std 0), which explore more
@@ -280,7 +268,6 @@ def _ppo_report_halfcheetah() -> Experiment:
 EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "dqn-cartpole": _dqn_cartpole,
     "dqn-lunarlander": _dqn_lunarlander,
-    "ppo-mujoco": _ppo_mujoco,
     "ppo-mujoco-1m": _ppo_mujoco_1m,
     "ddpg-report": _ddpg_report,
     "ddpg-report-sweeps": _ddpg_report_sweeps,
