@@ -234,12 +234,16 @@ class PPOPolicy:
         self.obs_clip = obs_clip
         self.low, self.high = low, high
 
-    def __call__(self, obs):
+    def observation(self, obs) -> torch.Tensor:
+        """One raw observation as the network sees it: scaled by training's statistics, a batch of one."""
         x = np.asarray(obs, dtype=np.float64)
         if self.obs_mean is not None:
             x = np.clip((x - self.obs_mean) / np.sqrt(self.obs_var + 1e-8), -self.obs_clip, self.obs_clip)
+        return torch.as_tensor(x, dtype=torch.float32).unsqueeze(0)
+
+    def __call__(self, obs):
         with torch.no_grad():
-            a = self.agent.deterministic(torch.as_tensor(x, dtype=torch.float32).unsqueeze(0))[0].numpy()
+            a = self.agent.deterministic(self.observation(obs))[0].numpy()
         if self.agent.discrete:
             return int(a)
         return np.clip(a, self.low, self.high)
