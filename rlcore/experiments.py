@@ -543,13 +543,23 @@ def gap_and_spread(finals: dict[str, np.ndarray]) -> tuple[str, str, float, floa
     return best, worst, means[best] - means[worst], max(float(np.std(f)) for f in finals.values())
 
 
+def scaling_runs(record: dict[str, Any]) -> dict[tuple[int, str], dict[str, Any]]:
+    """``benchmarks/dppo_scaling.py``'s runs by (workers, way of sharing)."""
+    return {(r["workers"], r.get("share", "gradients")): r for r in record["results"]}
+
+
+def learning_seconds(run: dict[str, Any]) -> float:
+    """Seconds per update outside the rollout (minibatch steps, synchronization, checkpoint) of one scaling run."""
+    return run["update_seconds_per_update"] - run["rollout_seconds_per_update"]
+
+
 def scaling_rows(record: dict[str, Any]) -> list[dict[str, Any]]:
     """One table row per run of ``benchmarks/dppo_scaling.py``'s record (rates in env-steps/s, times per update)."""
     return [{"workers": r["workers"], "sharing": r.get("share", "gradients") if r["workers"] > 1 else "(nothing)",
              "env-steps/s (training)": r["env_steps_per_second"], "ratio to 1 worker": f"{r['ratio_to_1_worker']:.2f}×",
              "env-steps/s incl. start-up": r["env_steps_per_second_wall"],
              "rollout s / update": f"{r['rollout_seconds_per_update']:.3f}",
-             "learning + sync s / update": f"{r['update_seconds_per_update'] - r['rollout_seconds_per_update']:.3f}"}
+             "learning + sync s / update": f"{learning_seconds(r):.3f}"}
             for r in record["results"]]
 
 

@@ -122,6 +122,9 @@ def test_scaling_rows_split_each_update_into_rollout_and_the_rest(scaling_record
     assert [(r["workers"], r["sharing"], r["ratio to 1 worker"]) for r in rows] == [
         (1, "(nothing)", "1.00×"), (2, "gradients", "1.40×"), (2, "rollouts", "1.90×")]
     assert rows[1]["learning + sync s / update"] == "0.400" and rows[2]["rollout s / update"] == "0.300"
+    by = ex.scaling_runs(scaling_record)
+    assert sorted(by) == [(1, "gradients"), (2, "gradients"), (2, "rollouts")]
+    assert ex.learning_seconds(by[2, "rollouts"]) == pytest.approx(0.22)
 
 
 def test_ppo_report_halfcheetah_is_the_two_by_two_of_memory_batch_and_update_steps():
