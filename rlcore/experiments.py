@@ -201,6 +201,17 @@ def _ddpg_modern() -> Experiment:
     )
 
 
+def _ddpg_modern_1m() -> Experiment:
+    overrides = {**MODERN_DDPG, "eval_every": 20_000, "checkpoint_every": 25_000}
+    return Experiment(
+        "ddpg-modern-1m",
+        "DDPG with modern settings (rlcore.ddpg.Config's defaults) at 1M steps on HalfCheetah-v5 and Humanoid-v5, "
+        "3 seeds",
+        tuple(RunSpec(env.split("-")[0].lower(), "ddpg", env, 1_000_000, (0, 1, 2), overrides,
+                      f"DDPG on {env}, modern settings, 1M steps") for env in ("HalfCheetah-v5", "Humanoid-v5")),
+    )
+
+
 # The course report's PPO settings for Hopper (its Table 6), in rlcore's names: memory-batch 128 = n_steps (one
 # full-batch gradient step per update step, so batch_size = n_steps), action/critic-update-steps 20 = n_epochs,
 # lam 0.98 = the initial KL coefficient, epoch x step-per-epoch = 50 x 1000 steps. Its algorithm box uses
@@ -272,6 +283,7 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "ddpg-report": _ddpg_report,
     "ddpg-report-sweeps": _ddpg_report_sweeps,
     "ddpg-modern": _ddpg_modern,
+    "ddpg-modern-1m": _ddpg_modern_1m,
     "ppo-report-hopper": _ppo_report_hopper,
     "ppo-report-halfcheetah": _ppo_report_halfcheetah,
 }

@@ -97,7 +97,7 @@ def test_report_metric_sums_rewards_per_epoch_over_the_last_epochs():
         report_metric(log, epoch_steps=10_000)
 
 
-def test_ddpg_sweep_arms_change_one_setting_of_the_report_table():
+def test_ddpg_sweep_arms_change_one_setting_of_the_report_table_and_modern_runs_only_their_budget():
     """Each arm of ddpg-report-sweeps is its ddpg-report run with only the setting its name says."""
     from rlcore.ddpg import Config
 
@@ -115,6 +115,14 @@ def test_ddpg_sweep_arms_change_one_setting_of_the_report_table():
         assert (arm.steps, arm.seeds, arm.algo) == (ref.steps, ref.seeds, "ddpg")
     modern = ex.get_experiment("ddpg-modern").runs[0]
     assert Config(**modern.overrides).hidden == Config().hidden and modern.steps == base["HalfCheetah-v5"].steps
+    long = {r.name: r for r in ex.get_experiment("ddpg-modern-1m").runs}  # the same settings, trained to 1M steps
+    assert sorted(long) == ["halfcheetah", "humanoid"] and long["humanoid"].env_id == "Humanoid-v5"
+    for run in long.values():
+        a, b = Config(**run.overrides), Config(**modern.overrides)
+        changed = {f for f in Config.__dataclass_fields__ if getattr(a, f) != getattr(b, f)}
+        assert changed <= {"eval_every", "checkpoint_every"}, changed
+        assert (run.steps, run.seeds) == (1_000_000, modern.seeds)
+    assert long["halfcheetah"].env_id == modern.env_id
 
 
 def test_scaling_rows_split_each_update_into_rollout_and_the_rest(scaling_record):
