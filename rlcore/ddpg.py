@@ -77,7 +77,8 @@ class Config:
     checkpoint_every: int = 50_000
     """Write checkpoint.pt every this many steps (and at the end, and on Ctrl-C)."""
     replay_in_checkpoint: bool = True
-    """Save the replay memory in the checkpoint so that a resumed run continues where it was."""
+    """Save the replay memory in the checkpoint. A run resumed from a checkpoint written at an episode's end is
+    then exactly the uninterrupted run; one stopped mid-episode restarts that episode."""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments for ``gymnasium.make``."""
 
@@ -193,6 +194,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     evals: list[tuple[int, float]] = []
 
     run, ckpt = open_run(out, "ddpg", env_id, seed, steps, config)
+    resumed_behaviour = None
     if ckpt is not None:
         for mod, key in ((actor, "actor"), (critic, "critic"), (actor_t, "actor_target"), (critic_t, "critic_target"),
                          (actor_opt, "actor_opt"), (critic_opt, "critic_opt")):
@@ -202,9 +204,15 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         step, episode = int(ckpt["step"]), int(ckpt["episode"])
         rng.bit_generator.state = ckpt["rng"]
         torch.set_rng_state(ckpt["torch_rng"])
-        for src in (noise, param_noise):  # the scale the noise had decayed or adapted to
-            if src is not None and hasattr(src, "sigma"):
-                src.sigma = float(ckpt["noise_sigma"])
+        if "noise" in ckpt:  # the noise's generator and state: the run continues as if never stopped
+            if noise is not None:
+                noise.load_state_dict(ckpt["noise"])
+            if param_noise is not None:
+                resumed_behaviour = param_noise.load_state_dict(ckpt["noise"], actor)
+        else:  # a checkpoint from before rlcore saved the noise: only the scale it had decayed or adapted to
+            for src in (noise, param_noise):
+                if src is not None and hasattr(src, "sigma"):
+                    src.sigma = float(ckpt["noise_sigma"])
     log = eval_log = None
     if run is not None:
         log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "noise_sigma"])
@@ -223,12 +231,17 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                  "critic_target": critic_t.state_dict(), "actor_opt": actor_opt.state_dict(),
                  "critic_opt": critic_opt.state_dict(), "rng": rng.bit_generator.state,
                  "torch_rng": torch.get_rng_state(), "noise_sigma": noise_sigma()}
+        for src in (noise, param_noise):
+            if src is not None:
+                state["noise"] = src.state_dict()
         if config.replay_in_checkpoint:
             state["replay"] = buffer.state_dict()
         save_checkpoint(run.checkpoint, state)
 
     obs, _ = env.reset(seed=episode_seed(seed, episode))
-    behaviour = param_noise.perturb(actor) if param_noise is not None else actor
+    behaviour = actor
+    if param_noise is not None:
+        behaviour = resumed_behaviour if resumed_behaviour is not None else param_noise.perturb(actor)
     ep_return, ep_len = 0.0, 0
     bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step", desc=f"DDPG {env_id}")
     try:

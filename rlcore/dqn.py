@@ -96,7 +96,8 @@ class Config:
     checkpoint_every: int = 10_000
     """Write checkpoint.pt every this many steps (and at the end, and on Ctrl-C)."""
     replay_in_checkpoint: bool = True
-    """Save the replay memory in the checkpoint so that a resumed run continues exactly."""
+    """Save the replay memory in the checkpoint. A run resumed from a checkpoint written at an episode's end is
+    then exactly the uninterrupted run; one stopped mid-episode restarts that episode."""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments for ``gymnasium.make``."""
 

@@ -32,6 +32,14 @@ class GaussianNoise:
     def reset(self) -> None:
         pass
 
+    def state_dict(self) -> dict:
+        """What a checkpoint needs to continue the same noise sequence: sigma and the generator's state."""
+        return {"sigma": self.sigma, "rng": self.rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.sigma = float(state["sigma"])
+        self.rng.bit_generator.state = state["rng"]
+
 
 class OrnsteinUhlenbeckNoise:
     """x_{t+1} = x_t + theta (mu - x_t) dt + sigma sqrt(dt) eps_t: mean-reverting, temporally correlated.
@@ -51,6 +59,14 @@ class OrnsteinUhlenbeckNoise:
 
     def reset(self) -> None:
         self.x[:] = self.mu
+
+    def state_dict(self) -> dict:
+        """The process's current value and the generator's state."""
+        return {"x": self.x.tolist(), "rng": self.rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.x = np.asarray(state["x"], dtype=float)
+        self.rng.bit_generator.state = state["rng"]
 
 
 def action_distance(actor_a: torch.nn.Module, actor_b: torch.nn.Module, obs: torch.Tensor) -> float:
@@ -84,3 +100,18 @@ class AdaptiveParamNoise:
         """Move sigma toward the target action distance; returns the new sigma."""
         self.sigma = self.sigma / self.alpha if distance > self.target_distance else self.sigma * self.alpha
         return self.sigma
+
+    def state_dict(self) -> dict:
+        """sigma, the generator's state and the current perturbed actor's weights."""
+        return {"sigma": self.sigma, "generator": self.generator.get_state(),
+                "perturbed": None if self.perturbed is None else self.perturbed.state_dict()}
+
+    def load_state_dict(self, state: dict, actor: torch.nn.Module) -> torch.nn.Module | None:
+        """Restore; returns the perturbed copy of ``actor`` the state holds (None if it holds none)."""
+        self.sigma = float(state["sigma"])
+        self.generator.set_state(state["generator"])
+        self.perturbed = None
+        if state["perturbed"] is not None:
+            self.perturbed = copy.deepcopy(actor)
+            self.perturbed.load_state_dict(state["perturbed"])
+        return self.perturbed

@@ -99,6 +99,19 @@ def test_reward_scale_does_not_change_the_logged_returns(tmp_path):
     np.testing.assert_allclose(a.episode_returns, b.episode_returns)  # random phase: same actions, raw returns
 
 
+@pytest.mark.parametrize("exploration", ["gaussian", "ou", "param"])
+def test_a_run_stopped_at_an_episode_end_and_resumed_is_the_uninterrupted_run(tmp_path, exploration):
+    torch.set_num_threads(1)
+    cfg = Config(exploration=exploration, explore_decay=0.999, **{**SMALL, "learning_starts": 100,
+                                                                  "checkpoint_every": 200})
+    whole = train("Pendulum-v1", cfg, steps=600, seed=3, out=tmp_path / "whole")
+    train("Pendulum-v1", cfg, steps=400, seed=3, out=tmp_path / "parts")  # Pendulum's episodes end every 200 steps
+    resumed = train("Pendulum-v1", cfg, steps=600, seed=3, out=tmp_path / "parts")
+    for key, value in whole.actor.state_dict().items():
+        assert torch.equal(value, resumed.actor.state_dict()[key]), key
+    np.testing.assert_array_equal(whole.episode_returns[2:], resumed.episode_returns)
+
+
 def test_resume_continues_from_the_checkpoint(tmp_path):
     torch.set_num_threads(1)
     from rlcore.checkpoint import load_checkpoint

@@ -172,3 +172,14 @@ def test_update_fits_a_batch_of_different_targets():
     with torch.no_grad():
         fitted = q(torch.as_tensor(obs)).gather(1, torch.tensor([[0], [1], [0]])).squeeze(1)
     torch.testing.assert_close(fitted, torch.tensor([1.0, -2.0, 5.0]), atol=1e-2, rtol=0)
+
+
+@pytest.mark.parametrize("variant", [{}, {"double": True, "dueling": True, "prioritized": True}])
+def test_a_run_stopped_at_an_episode_end_and_resumed_is_the_uninterrupted_run(tmp_path, variant):
+    torch.set_num_threads(1)
+    whole = train("CartPole-v1", _small(**variant), steps=1_500, seed=2, out=tmp_path / "whole")
+    stop = int(next(e for e in whole.episode_end_steps if e > 800))  # an episode ends there: nothing in flight
+    train("CartPole-v1", _small(**variant), steps=stop, seed=2, out=tmp_path / "parts")
+    resumed = train("CartPole-v1", _small(**variant), steps=1_500, seed=2, out=tmp_path / "parts")
+    for pa, pb in zip(whole.q.parameters(), resumed.q.parameters()):
+        torch.testing.assert_close(pa, pb, rtol=0, atol=0)
