@@ -124,11 +124,14 @@ def _ppo_mujoco_1m() -> Experiment:
     runs.append(RunSpec("hopper-zoo-logstd0", "ppo", "Hopper-v5", 1_000_000, seeds[:3],
                         {**ZOO_PPO["Hopper-v5"], **_ZOO_PPO_NET, **evals, "log_std_init": 0.0},
                         "PPO-clip on Hopper-v5, RL-Zoo settings but initial log std 0"))
+    # and the other direction: the paper's settings with RL Zoo's initial log std
+    runs.append(RunSpec("hopper-paper-logstd-2", "ppo", "Hopper-v5", 1_000_000, seeds[:3], {**evals, "log_std_init": -2.0},
+                        "PPO-clip on Hopper-v5, the PPO paper's settings but initial log std -2"))
     return Experiment(
         "ppo-mujoco-1m",
         "PPO (clipped) at the reference budget, 1M steps: HalfCheetah-v5 with RL-Zoo's settings and Hopper-v5 with "
-        "the PPO paper's, 5 seeds; Hopper-v5 with RL-Zoo's settings, and with them but the paper's initial log std, "
-        "3 seeds",
+        "the PPO paper's, 5 seeds; Hopper-v5 with RL-Zoo's settings, with them but the paper's initial log std, and "
+        "with the paper's but RL Zoo's initial log std, 3 seeds",
         tuple(runs),
     )
 
