@@ -193,8 +193,11 @@ def main(argv: list[str] | None = None) -> int:
     from rlcore.render import HeadlessGLError
 
     args = build_parser().parse_args(argv)
-    # A `kill` (SIGTERM, e.g. from a job scheduler) ends a run like Ctrl-C does: checkpoint first.
+    # A `kill` (SIGTERM, e.g. from a job scheduler) ends a run like Ctrl-C does: checkpoint first. SIGINT too, even
+    # where it arrives ignored: a shell starts background jobs (`cmd &`) with SIGINT ignored, and Python then keeps
+    # it ignored, so `kill -INT` would do nothing to such a run.
     signal.signal(signal.SIGTERM, signal.default_int_handler)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         return args.func(args)
     except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:

@@ -93,13 +93,20 @@ def test_interrupt_leaves_a_usable_checkpoint_and_resumes(tmp_path, sig):
     out = tmp_path / "long"
     cmd = [sys.executable, "-m", "rlcore", "train", "q-learning", "--env", "Taxi-v4", "--steps", "50000000",
            "--out", str(out), "--no-progress", "--set", "checkpoint_every=100000000"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 60
-    while time.time() < deadline and not (out / "progress.csv").exists():
-        time.sleep(0.2)
-    time.sleep(1.0)  # train a little
-    proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
+    # started with SIGINT ignored, as a shell starts a background job (`cmd &`): the run must still stop on it
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and not (out / "progress.csv").exists():
+            time.sleep(0.2)
+        time.sleep(1.0)  # train a little
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:  # it ignored the signal: do not leave it training after the test
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 130, err
     assert "Checkpoint saved" in err
     ckpt = load_checkpoint(out / "checkpoint.pt")
