@@ -54,18 +54,14 @@ def sb3_settings(env_id: str) -> tuple[dict, int]:
 
 
 def evaluate(model, train_env, env, episodes: int, seed: int) -> list[float]:
-    """Undiscounted returns of the deterministic policy, observations scaled by the current statistics."""
-    out = []
-    for i in range(episodes):
-        obs, _ = env.reset(seed=seed + i)
-        done, total = False, 0.0
-        while not done:
-            action, _ = model.predict(train_env.normalize_obs(obs[None].astype(np.float32)), deterministic=True)
-            obs, reward, terminated, truncated, _ = env.step(action[0])
-            total += float(reward)
-            done = terminated or truncated
-        out.append(total)
-    return out
+    """Undiscounted returns of the deterministic policy, observations scaled by the current statistics, with
+    rlcore's evaluation loop (episode i from ``env.reset(seed=seed + i)``)."""
+    from rlcore.evaluate import evaluate_policy
+
+    def policy(obs):
+        return model.predict(train_env.normalize_obs(obs[None].astype(np.float32)), deterministic=True)[0][0]
+
+    return evaluate_policy(policy, env, episodes, seed).tolist()
 
 
 def train_seed(env_id: str, seed: int, settings: dict, steps: int) -> dict:

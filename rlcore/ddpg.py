@@ -194,7 +194,6 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     evals: list[tuple[int, float]] = []
 
     run, ckpt = open_run(out, "ddpg", env_id, seed, steps, config)
-    resumed_behaviour = None
     if ckpt is not None:
         for mod, key in ((actor, "actor"), (critic, "critic"), (actor_t, "actor_target"), (critic_t, "critic_target"),
                          (actor_opt, "actor_opt"), (critic_opt, "critic_opt")):
@@ -208,7 +207,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
             if noise is not None:
                 noise.load_state_dict(ckpt["noise"])
             if param_noise is not None:
-                resumed_behaviour = param_noise.load_state_dict(ckpt["noise"], actor)
+                param_noise.load_state_dict(ckpt["noise"], actor)
         else:  # a checkpoint from before rlcore saved the noise: only the scale it had decayed or adapted to
             for src in (noise, param_noise):
                 if src is not None and hasattr(src, "sigma"):
@@ -240,8 +239,8 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
 
     obs, _ = env.reset(seed=episode_seed(seed, episode))
     behaviour = actor
-    if param_noise is not None:
-        behaviour = resumed_behaviour if resumed_behaviour is not None else param_noise.perturb(actor)
+    if param_noise is not None:  # the perturbed actor a checkpoint restored, or a fresh one
+        behaviour = param_noise.perturbed if param_noise.perturbed is not None else param_noise.perturb(actor)
     ep_return, ep_len = 0.0, 0
     bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step", desc=f"DDPG {env_id}")
     try:

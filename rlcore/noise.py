@@ -106,12 +106,11 @@ class AdaptiveParamNoise:
         return {"sigma": self.sigma, "generator": self.generator.get_state(),
                 "perturbed": None if self.perturbed is None else self.perturbed.state_dict()}
 
-    def load_state_dict(self, state: dict, actor: torch.nn.Module) -> torch.nn.Module | None:
-        """Restore; returns the perturbed copy of ``actor`` the state holds (None if it holds none)."""
+    def load_state_dict(self, state: dict, actor: torch.nn.Module) -> None:
+        """Restore; ``perturbed`` becomes a copy of ``actor`` with the saved perturbed weights (if any)."""
         self.sigma = float(state["sigma"])
         self.generator.set_state(state["generator"])
         self.perturbed = None
         if state["perturbed"] is not None:
             self.perturbed = copy.deepcopy(actor)
             self.perturbed.load_state_dict(state["perturbed"])
-        return self.perturbed
