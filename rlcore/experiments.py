@@ -491,6 +491,11 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
         text += " Resumed from a checkpoint: " + "; ".join(
             f"seed {seed} at step {r['step']:,} ({r.get('machine', {}).get('cpus', '?')} CPUs, commit "
             f"{str(r.get('commit'))[:7]}, PyTorch {r.get('versions', {}).get('torch')})" for seed, r in resumes) + "."
+    moved = [(s.seed, s.meta["checkout_at_start"]) for s in run.seeds if s.meta.get("checkout_at_start")]
+    if moved:  # a long-lived process ran code it had loaded before the checkout moved on (see rlcore.runs)
+        text += " Trained by a process that had loaded its code earlier: " + "; ".join(
+            f"seed {seed} (the checkout was already at {str(c)[:7]})" for seed, c in moved) + "."
+    text += "".join(f" Seed {s.seed}: {s.meta['provenance_note']}" for s in run.seeds if s.meta.get("provenance_note"))
     if run.missing:
         text += (f"\n\n:::{{warning}}\nSeeds {run.missing} of *{run.label}* are not in `{folder}` yet; this page "
                  f"shows the {len(seeds)} that are. Run `{command}` to finish them.\n:::")

@@ -551,6 +551,17 @@ def make_config(algo: str, **overrides: Any) -> Config:
     return Config(**overrides)
 
 
+def evaluated_unclipped(ckpt: dict[str, Any]) -> bool:
+    """Whether the code that wrote this checkpoint (or saved policy) evaluated unclipped mean actions.
+
+    Before the deterministic policy clipped its actions, :func:`check_spaces` recorded ClipAction's +-inf
+    bounds, and the evaluations logged during training handed the raw Gaussian mean to the environment.
+    Such a run's ``eval.csv`` undercounts on tasks with a control cost; :func:`load_policy` fixes the policy.
+    """
+    sp = ckpt.get("spaces", {})
+    return "low" in sp and not (np.isfinite(sp["low"]).all() and np.isfinite(sp["high"]).all())
+
+
 def load_policy(ckpt: dict[str, Any]) -> PPOPolicy:
     sp = ckpt["spaces"]
     config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
@@ -560,8 +571,7 @@ def load_policy(ckpt: dict[str, Any]) -> PPOPolicy:
     to_np = lambda t: None if t is None else t.numpy()  # noqa: E731
     low = np.array(sp["low"], dtype=np.float32) if "low" in sp else None
     high = np.array(sp["high"], dtype=np.float32) if "high" in sp else None
-    if low is not None and not (np.isfinite(low).all() and np.isfinite(high).all()) and "env_id" in ckpt:
-        # checkpoints written before the fix in check_spaces hold ClipAction's +-inf: ask the environment
+    if evaluated_unclipped(ckpt) and "env_id" in ckpt:  # ClipAction's +-inf: ask the environment
         env = gym.make(ckpt["env_id"], **config.env_kwargs)
         low, high = env.action_space.low.astype(np.float32), env.action_space.high.astype(np.float32)
         env.close()

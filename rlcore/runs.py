@@ -85,6 +85,15 @@ def git_commit(cwd: str | os.PathLike | None = None) -> str | None:
         return None
 
 
+LOADED_COMMIT = git_commit()
+"""The checkout's commit when this process imported :mod:`rlcore.runs`, that is, the code it runs.
+
+A long-lived process (``experiments run`` training seed after seed) keeps running the code it loaded, even
+when the checkout moves on to new commits meanwhile. So a run records this commit, not the checkout's
+current one; where the two differ, :func:`run_metadata` records the latter as ``checkout_at_start``.
+"""
+
+
 def versions() -> dict[str, str]:
     """Versions of the pieces a result depends on."""
     import gymnasium
@@ -118,15 +127,23 @@ def command_line() -> str | None:
 
 
 def run_metadata(**extra: Any) -> dict[str, Any]:
-    """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``."""
-    return {
+    """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``.
+
+    ``commit`` is :data:`LOADED_COMMIT`, the code this process runs; ``checkout_at_start`` is added when the
+    checkout has moved on since this process loaded it.
+    """
+    meta = {
         "command": command_line(),
         "versions": versions(),
-        "commit": git_commit(),
+        "commit": LOADED_COMMIT,
         "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count()},
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **extra,
     }
+    now = git_commit()
+    if now != LOADED_COMMIT:
+        meta["checkout_at_start"] = now
+    return meta
 
 
 def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, steps: int, config: Any,
@@ -158,7 +175,8 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
             record = json.loads(run.meta.read_text())
             resume = run_metadata(step=int(ckpt.get("step", 0)))
             record.setdefault("resumes", []).append({k: resume[k] for k in ("step", "started", "command", "commit",
-                                                                             "machine", "versions")})
+                                                                             "checkout_at_start", "machine",
+                                                                             "versions") if k in resume})
             write_json(run.meta, record)
         return run, ckpt
     write_json(run.config, {"algo": algo, "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})

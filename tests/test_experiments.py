@@ -82,7 +82,10 @@ def test_load_or_train_falls_back_to_a_live_run_and_says_so(tiny, tmp_path):
     assert stored.source == "results" and [s.seed for s in stored.seeds] == [0] and stored.steps == 600
     text = ex.provenance_markdown("tiny", stored)
     assert "seeds [0] (1 of 1), 600 steps" in text and "python -m rlcore experiments run tiny" in text
-    assert "{warning}" not in text
+    assert "{warning}" not in text and "loaded its code earlier" not in text
+    stored.seeds[0].meta.update(checkout_at_start="fedcba9876", provenance_note="Trained before the fix.")
+    text = ex.provenance_markdown("tiny", stored)
+    assert "seed 0 (the checkout was already at fedcba9)" in text and "Seed 0: Trained before the fix." in text
     assert len(stored.seeds[0].episode_returns) == len(stored.seeds[0].episode_end_steps) > 0
 
 

@@ -6,7 +6,8 @@ from rlcore import ppo
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.ppo import (
-    ActorCritic, Config, adaptive_kl_coef, approx_kl, clipped_surrogate, kl_penalty_surrogate, load_policy, train,
+    ActorCritic, Config, adaptive_kl_coef, approx_kl, clipped_surrogate, evaluated_unclipped, kl_penalty_surrogate,
+    load_policy, train,
 )
 
 
@@ -171,12 +172,13 @@ def test_the_deterministic_policy_clips_to_the_environments_own_action_bounds(tm
     result = train("Pendulum-v1", config, steps=64, seed=0, out=tmp_path / "run")
     assert list(result.policy.low) == [-2.0] and list(result.policy.high) == [2.0]  # not ClipAction's +-inf
     ckpt = load_checkpoint(tmp_path / "run" / "checkpoint.pt")
-    assert ckpt["spaces"]["low"] == [-2.0]
+    assert ckpt["spaces"]["low"] == [-2.0] and not evaluated_unclipped(ckpt)
     with torch.no_grad():
         result.agent.actor[-1].bias.fill_(50.0)  # a mean far outside the bounds
     assert result.policy(np.zeros(3)).tolist() == [2.0]
     # a checkpoint from before the fix, with infinite bounds, gets the environment's
     ckpt["spaces"] = {**ckpt["spaces"], "low": [-np.inf], "high": [np.inf]}
     save_checkpoint(tmp_path / "old.pt", ckpt)
+    assert evaluated_unclipped(load_checkpoint(tmp_path / "old.pt"))
     policy = load_policy(load_checkpoint(tmp_path / "old.pt"))
     assert policy.low.tolist() == gym.make("Pendulum-v1").action_space.low.tolist() == [-2.0]

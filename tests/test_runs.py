@@ -1,0 +1,32 @@
+"""rlcore.runs: what a run records about the code that trained it."""
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+
+from rlcore import runs
+
+
+def test_a_process_records_the_commit_it_loaded_not_the_checkouts_later_one():
+    # a long experiment process keeps the code it imported while the checkout moves on to new commits
+    code = ("import os, rlcore.runs as r; os.environ['RLCORE_COMMIT'] = 'later'; m = r.run_metadata(); "
+            "print(m['commit'], m['checkout_at_start'])")
+    out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "RLCORE_COMMIT": "loaded"},
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["loaded", "later"]
+
+
+def test_no_checkout_field_while_the_checkout_is_what_was_loaded(tmp_path, monkeypatch):
+    @dataclass
+    class Tiny:
+        lr: float = 0.1
+
+    monkeypatch.setattr(runs, "LOADED_COMMIT", "abc")
+    monkeypatch.setattr(runs, "git_commit", lambda cwd=None: "abc")
+    run, ckpt = runs.open_run(tmp_path / "run", "q-learning", "FrozenLake-v1", 0, 10, Tiny())
+    meta = json.loads(run.meta.read_text())
+    assert ckpt is None and meta["commit"] == "abc" and "checkout_at_start" not in meta
+    monkeypatch.setattr(runs, "git_commit", lambda cwd=None: "def+dirty")
+    assert runs.run_metadata()["checkout_at_start"] == "def+dirty"
