@@ -190,6 +190,31 @@ def _ddpg_report_sweeps() -> Experiment:
     )
 
 
+# The report's Humanoid-v2 DDPG (its Table 4 and the "large-scale" variant its text describes), where it "reached a
+# bad local optimal". Small: one hidden layer of 512, memory 100k, 100 epochs x 5000 steps. Large: two hidden
+# layers of 1024, memory 1M, 500 epochs x 5000 steps, explore-decay 0.999998. Both with exploration noise on.
+REPORT_DDPG_HUMANOID: dict[str, tuple[int, dict[str, Any], str]] = {
+    # run name: (steps, Config overrides, label)
+    "small": (500_000, {"buffer_size": 100_000, "hidden": (512,), "tau": 0.005, "batch_size": 256,
+                        "learning_starts": 25_000, "explore_decay": 0.999995, "reward_scale": 50.0,
+                        "eval_every": 10_000}, "the report's Table 4 (one layer of 512)"),
+    "large": (2_500_000, {"buffer_size": 1_000_000, "hidden": (1024, 1024), "tau": 0.005, "batch_size": 256,
+                          "learning_starts": 25_000, "explore_decay": 0.999998, "reward_scale": 50.0,
+                          "eval_every": 25_000}, "the report's large-scale variant (two layers of 1024)"),
+}
+
+
+def _ddpg_report_humanoid() -> Experiment:
+    return Experiment(
+        "ddpg-report-humanoid",
+        "DDPG with the course report's Humanoid settings (Table 4: one layer of 512, 500k steps; its large-scale "
+        "variant: two layers of 1024, 2.5M steps) on Humanoid-v5, 3 seeds",
+        tuple(RunSpec(name, "ddpg", "Humanoid-v5", steps, (0, 1, 2),
+                      {**_REPORT_DDPG_COMMON, "checkpoint_every": 25_000, **hp}, f"DDPG on Humanoid-v5, {label}")
+              for name, (steps, hp, label) in REPORT_DDPG_HUMANOID.items()),
+    )
+
+
 # "Modern" DDPG settings, rlcore.ddpg.Config's defaults (two 256-unit layers, batch 256, tau 0.005, both step sizes
 # 1e-3, constant Gaussian noise 0.1, 10k random steps first), at the report's HalfCheetah budget, beside ddpg-report.
 MODERN_DDPG: dict[str, Any] = {"eval_every": 10_000, "eval_episodes": 5, "checkpoint_every": 50_000}
@@ -285,6 +310,7 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "ppo-mujoco-1m": _ppo_mujoco_1m,
     "ddpg-report": _ddpg_report,
     "ddpg-report-sweeps": _ddpg_report_sweeps,
+    "ddpg-report-humanoid": _ddpg_report_humanoid,
     "ddpg-modern": _ddpg_modern,
     "ddpg-modern-1m": _ddpg_modern_1m,
     "ppo-report-hopper": _ppo_report_hopper,
