@@ -136,7 +136,7 @@ def cmd_experiments(args: argparse.Namespace) -> int:
                   "when you run the same command again.", file=sys.stderr)
             return EXIT_INTERRUPTED
         print("\n".join(lines))
-    print("\n".join(ex.status_lines(args.name, results)))
+    print("\n".join(ex.status_lines(args.name, results, Path(args.work))))
     return 0
 
 

@@ -528,12 +528,19 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
     return text + "\n"
 
 
-def status_lines(name: str, results: Path = RESULTS_DIR) -> list[str]:
+def status_lines(name: str, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
+    """One line per run: seeds finished in ``results``, and how far each unfinished one has trained in ``work``."""
     lines = []
     for run, res in load_experiment(name, results).items():
         have = len(res.seeds)
         total = have + len(res.missing)
         lines.append(f"{name}/{run}: {have}/{total} seeds" + (f" (missing {res.missing})" if res.missing else ""))
+        for seed in res.missing:
+            folder, _ = run_paths(name, run, seed, results, work)
+            progress = read_csv(folder / "progress.csv") if (folder / "progress.csv").exists() else {}
+            if (folder / "checkpoint.pt").exists() and len(progress.get("step", [])):
+                lines.append(f"  seed {seed}: trained to step {int(progress['step'][-1]):,} of {res.spec.steps:,} in "
+                             f"{folder}; `experiments run` resumes it from its last checkpoint")
     return lines
 
 

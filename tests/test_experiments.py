@@ -1,4 +1,5 @@
 import json
+import shutil
 
 import numpy as np
 
@@ -23,7 +24,15 @@ def tiny(monkeypatch):
 
 def test_run_writes_small_results_and_is_resumable(tiny, tmp_path):
     results, work = tmp_path / "results", tmp_path / "runs"
-    assert ex.status_lines("tiny", results) == ["tiny/ql: 0/2 seeds (missing [0, 1])", "tiny/dqn: 0/1 seeds (missing [0])"]
+    assert ex.status_lines("tiny", results, work) == ["tiny/ql: 0/2 seeds (missing [0, 1])",
+                                                      "tiny/dqn: 0/1 seeds (missing [0])"]
+    # a seed that has trained part of the way (a checkpoint and a progress log in the work folder) says how far
+    part = work / "tiny" / "dqn" / "seed-0"
+    part.mkdir(parents=True)
+    (part / "progress.csv").write_text("episode,step,episode_return\n1,20,20.0\n2,45,25.0\n")
+    (part / "checkpoint.pt").write_bytes(b"")
+    assert ex.status_lines("tiny", results, work)[2].startswith("  seed 0: trained to step 45 of 600 in ")
+    shutil.rmtree(part)
     ex.run_experiment("tiny", only=["ql"], seeds=[0], results=results, work=work)
     loaded = ex.load_experiment("tiny", results)
     assert [s.seed for s in loaded["ql"].seeds] == [0] and loaded["ql"].missing == [1]
