@@ -65,6 +65,8 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
 def git_commit(cwd: str | os.PathLike | None = None) -> str | None:
     """The current git commit of the rlcore checkout (``+dirty`` if it has changes), or None.
 
+    Changes under ``results/`` do not count: those are outputs (a run being copied in), not code.
+
     A copy of the tree without ``.git`` (a remote machine, say) can name its commit in ``RLCORE_COMMIT``.
     """
     cwd = cwd or Path(__file__).resolve().parent
@@ -77,7 +79,7 @@ def git_commit(cwd: str | os.PathLike | None = None) -> str | None:
         if sha.returncode != 0:
             return None
         dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", ":(top)", ":(top,exclude)results"],
             cwd=cwd, capture_output=True, text=True, timeout=10,
         )
         return sha.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")

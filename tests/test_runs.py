@@ -30,3 +30,23 @@ def test_no_checkout_field_while_the_checkout_is_what_was_loaded(tmp_path, monke
     assert ckpt is None and meta["commit"] == "abc" and "checkout_at_start" not in meta
     monkeypatch.setattr(runs, "git_commit", lambda cwd=None: "def+dirty")
     assert runs.run_metadata()["checkout_at_start"] == "def+dirty"
+
+
+def test_changes_under_results_do_not_make_a_checkout_dirty(tmp_path, monkeypatch):
+    monkeypatch.delenv("RLCORE_COMMIT", raising=False)
+
+    def git(*args):
+        subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "eval.csv").write_text("1\n")
+    (tmp_path / "code.py").write_text("x = 1\n")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@example.org", "commit", "-qm", "start")
+    clean = runs.git_commit(tmp_path)
+    assert clean is not None and len(clean) == 40
+    (tmp_path / "results" / "eval.csv").write_text("2\n")  # a run's outputs being copied in
+    assert runs.git_commit(tmp_path) == clean
+    (tmp_path / "code.py").write_text("x = 2\n")
+    assert runs.git_commit(tmp_path) == clean + "+dirty"
