@@ -521,7 +521,12 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
     if moved:  # a long-lived process ran code it had loaded before the checkout moved on (see rlcore.runs)
         text += " Trained by a process that had loaded its code earlier: " + "; ".join(
             f"seed {seed} (the checkout was already at {str(c)[:7]})" for seed, c in moved) + "."
-    text += "".join(f" Seed {s.seed}: {s.meta['provenance_note']}" for s in run.seeds if s.meta.get("provenance_note"))
+    notes: dict[str, list[int]] = {}
+    for s in run.seeds:
+        if s.meta.get("provenance_note"):
+            notes.setdefault(s.meta["provenance_note"], []).append(s.seed)
+    text += "".join(f" Seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}: {note}"
+                    for note, seeds in notes.items())
     if run.missing:
         text += (f"\n\n:::{{warning}}\nSeeds {run.missing} of *{run.label}* are not in `{folder}` yet; this page "
                  f"shows the {len(seeds)} that are. Run `{command}` to finish them.\n:::")
