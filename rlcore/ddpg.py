@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+from gymnasium.wrappers.utils import RunningMeanStd
 import numpy as np
 import torch
 from torch import nn
@@ -27,14 +28,14 @@ from tqdm import tqdm
 from rlcore.buffers import ReplayBuffer
 from rlcore.checkpoint import save_checkpoint
 from rlcore.dqn import soft_update
-from rlcore.envs import make_env
+from rlcore.envs import make_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.nets import mlp
 from rlcore.noise import AdaptiveParamNoise, GaussianNoise, OrnsteinUhlenbeckNoise, action_distance
 from rlcore.runs import config_dict, episode_seed, open_run
 
-POLICY_KEYS = ("actor", "spaces")
+POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
 """Checkpoint keys :func:`load_policy` needs."""
 
 EXPLORATION = ("gaussian", "ou", "param", "none")
@@ -70,6 +71,11 @@ class Config:
     """Parameter noise: target distance between perturbed and unperturbed actions."""
     reward_scale: float = 1.0
     """Rewards are multiplied by this for learning (Gymnasium's TransformReward) [reward-factor]."""
+    normalize_obs: bool = False
+    """Scale observations by the running mean and variance of all observations so far, clipped to +-10, as OpenAI
+    Baselines' DDPG does. The memory keeps raw observations; acting and every minibatch use the current statistics,
+    and the saved policy keeps the final ones. Tasks with large raw observations (Humanoid's contact and actuator
+    forces reach thousands) otherwise saturate the actor's tanh."""
     eval_every: int = 10_000
     """Evaluate the deterministic policy every this many steps (0: never)."""
     eval_episodes: int = 5
@@ -131,14 +137,16 @@ def actor_loss(actor: nn.Module, critic: nn.Module, obs: torch.Tensor) -> torch.
 
 
 class DeterministicPolicy:
-    """mu(s) for one observation, as a NumPy action."""
+    """mu(s) for one observation, as a NumPy action (scaled by training's statistics, with normalize_obs)."""
 
-    def __init__(self, actor: nn.Module):
+    def __init__(self, actor: nn.Module, obs_mean=None, obs_var=None):
         self.actor = actor.eval()
+        self.obs_mean, self.obs_var = obs_mean, obs_var
 
     def __call__(self, obs):
+        x = obs if self.obs_mean is None else normalize_observation(obs, self.obs_mean, self.obs_var)
         with torch.no_grad():
-            return self.actor(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0))[0].numpy()
+            return self.actor(torch.as_tensor(x, dtype=torch.float32).unsqueeze(0))[0].numpy()
 
 
 def check_spaces(env: gym.Env, env_id: str) -> dict[str, Any]:
@@ -160,6 +168,8 @@ class Result:
     eval_steps: np.ndarray
     eval_returns: np.ndarray
     steps: int
+    policy: DeterministicPolicy
+    """The final deterministic policy, with the observation statistics when normalize_obs."""
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
@@ -188,6 +198,18 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     else:
         noise = None
     param_noise = AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed) if config.exploration == "param" else None
+    obs_rms = RunningMeanStd(shape=(sp["obs_dim"],)) if config.normalize_obs else None
+
+    def scaled(x: np.ndarray) -> torch.Tensor:
+        """Observations as the networks see them: raw, or scaled by the running statistics (normalize_obs)."""
+        return torch.as_tensor(x if obs_rms is None else normalize_observation(x, obs_rms.mean, obs_rms.var),
+                               dtype=torch.float32)
+
+    def policy() -> DeterministicPolicy:
+        if obs_rms is None:
+            return DeterministicPolicy(actor)
+        return DeterministicPolicy(actor, obs_rms.mean.copy(), obs_rms.var.copy())
+
     step = episode = 0
     returns: list[float] = []
     end_steps: list[int] = []
@@ -201,6 +223,9 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         if "replay" in ckpt:
             buffer.load_state_dict(ckpt["replay"])
         step, episode = int(ckpt["step"]), int(ckpt["episode"])
+        if obs_rms is not None:
+            obs_rms.mean, obs_rms.var = np.asarray(ckpt["obs_mean"]), np.asarray(ckpt["obs_var"])
+            obs_rms.count = float(ckpt["obs_count"])
         rng.bit_generator.state = ckpt["rng"]
         torch.set_rng_state(ckpt["torch_rng"])
         if "noise" in ckpt:  # the noise's generator and state: the run continues as if never stopped
@@ -233,6 +258,8 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         for src in (noise, param_noise):
             if src is not None:
                 state["noise"] = src.state_dict()
+        if obs_rms is not None:
+            state.update(obs_mean=obs_rms.mean, obs_var=obs_rms.var, obs_count=float(obs_rms.count))
         if config.replay_in_checkpoint:
             state["replay"] = buffer.state_dict()
         save_checkpoint(run.checkpoint, state)
@@ -250,11 +277,13 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 action = rng.uniform(low, high).astype(np.float32)
             else:
                 with torch.no_grad():
-                    action = behaviour(torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0))[0].numpy()
+                    action = behaviour(scaled(obs).unsqueeze(0))[0].numpy()
                 if noise is not None:
                     action = np.clip(action + half * noise(), low, high).astype(np.float32)
             next_obs, reward, terminated, truncated, info = env.step(action)
             buffer.add(obs, action, reward, next_obs, terminated)
+            if obs_rms is not None:
+                obs_rms.update(next_obs[None])
             obs = next_obs
             step += 1
             ep_len += 1
@@ -272,13 +301,13 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 if noise is not None:
                     noise.reset()
                 if param_noise is not None and len(buffer) >= config.batch_size:
-                    states = torch.as_tensor(buffer.sample(config.batch_size).obs)
+                    states = scaled(buffer.sample(config.batch_size).obs)
                     param_noise.adapt(action_distance(actor, behaviour, states))
                     behaviour = param_noise.perturb(actor)
             if step >= config.learning_starts:
                 b = buffer.sample(config.batch_size)
-                o, a, r = torch.as_tensor(b.obs), torch.as_tensor(b.actions), torch.as_tensor(b.rewards)
-                o2, term = torch.as_tensor(b.next_obs), torch.as_tensor(b.terminated)
+                o, a, r = scaled(b.obs), torch.as_tensor(b.actions), torch.as_tensor(b.rewards)
+                o2, term = scaled(b.next_obs), torch.as_tensor(b.terminated)
                 y = critic_target(actor_t, critic_t, o2, r, term, config.gamma)
                 loss_q = critic_loss(critic, o, a, y)
                 critic_opt.zero_grad(set_to_none=True)
@@ -295,7 +324,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 soft_update(actor_t, actor, config.tau)
                 soft_update(critic_t, critic, config.tau)
             if config.eval_every and step % config.eval_every == 0:
-                rets = evaluate_policy(DeterministicPolicy(actor), eval_env, config.eval_episodes, seed=seed + 10_000)
+                rets = evaluate_policy(policy(), eval_env, config.eval_episodes, seed=seed + 10_000)
                 actor.train()
                 evals.append((step, float(rets.mean())))
                 if eval_log is not None:
@@ -315,7 +344,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 f.close()
     checkpoint()
     return Result(actor, critic, np.array(returns), np.array(end_steps, dtype=int),
-                  np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step)
+                  np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step, policy())
 
 
 def make_config(algo: str, **overrides: Any) -> Config:
@@ -327,4 +356,6 @@ def load_policy(ckpt: dict[str, Any]) -> DeterministicPolicy:
     config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
     actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
     actor.load_state_dict(ckpt["actor"])
-    return DeterministicPolicy(actor)
+    if ckpt.get("obs_mean") is None:
+        return DeterministicPolicy(actor)
+    return DeterministicPolicy(actor, np.asarray(ckpt["obs_mean"]), np.asarray(ckpt["obs_var"]))

@@ -11,6 +11,7 @@ import difflib
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 
 class UnknownEnvironmentError(ValueError):
@@ -112,3 +113,9 @@ def space_shape(space: gym.Space) -> tuple[int, ...]:
     if isinstance(space, gym.spaces.Discrete):
         return (int(space.n),)
     return tuple(space.shape)
+
+
+def normalize_observation(obs, mean, var, clip: float = 10.0) -> np.ndarray:
+    """(obs - mean) / sqrt(var + 1e-8), clipped to +-clip: Gymnasium's NormalizeObservation with given statistics
+    (and the clipping of SB3's VecNormalize). Policies apply their training's statistics with it."""
+    return np.clip((np.asarray(obs, dtype=np.float64) - mean) / np.sqrt(var + 1e-8), -clip, clip)

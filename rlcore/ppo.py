@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_checkpoint, save_checkpoint
-from rlcore.envs import make_env, make_vec_env
+from rlcore.envs import make_env, make_vec_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.nets import mlp
@@ -238,7 +238,7 @@ class PPOPolicy:
         """One raw observation as the network sees it: scaled by training's statistics, a batch of one."""
         x = np.asarray(obs, dtype=np.float64)
         if self.obs_mean is not None:
-            x = np.clip((x - self.obs_mean) / np.sqrt(self.obs_var + 1e-8), -self.obs_clip, self.obs_clip)
+            x = normalize_observation(x, self.obs_mean, self.obs_var, self.obs_clip)
         return torch.as_tensor(x, dtype=torch.float32).unsqueeze(0)
 
     def __call__(self, obs):

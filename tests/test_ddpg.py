@@ -99,11 +99,12 @@ def test_reward_scale_does_not_change_the_logged_returns(tmp_path):
     np.testing.assert_allclose(a.episode_returns, b.episode_returns)  # random phase: same actions, raw returns
 
 
-@pytest.mark.parametrize("exploration", ["gaussian", "ou", "param"])
-def test_a_run_stopped_at_an_episode_end_and_resumed_is_the_uninterrupted_run(tmp_path, exploration):
+@pytest.mark.parametrize("exploration,normalize_obs", [("gaussian", False), ("ou", False), ("param", False),
+                                                       ("gaussian", True)])
+def test_a_run_stopped_at_an_episode_end_and_resumed_is_the_uninterrupted_run(tmp_path, exploration, normalize_obs):
     torch.set_num_threads(1)
-    cfg = Config(exploration=exploration, explore_decay=0.999, **{**SMALL, "learning_starts": 100,
-                                                                  "checkpoint_every": 200})
+    cfg = Config(exploration=exploration, explore_decay=0.999, normalize_obs=normalize_obs,
+                 **{**SMALL, "learning_starts": 100, "checkpoint_every": 200})
     whole = train("Pendulum-v1", cfg, steps=600, seed=3, out=tmp_path / "whole")
     train("Pendulum-v1", cfg, steps=400, seed=3, out=tmp_path / "parts")  # Pendulum's episodes end every 200 steps
     resumed = train("Pendulum-v1", cfg, steps=600, seed=3, out=tmp_path / "parts")
@@ -124,3 +125,27 @@ def test_resume_continues_from_the_checkpoint(tmp_path):
     assert len(load_checkpoint(tmp_path / "checkpoint.pt")["replay"]["rewards"]) == 600  # kept the 400
     with pytest.raises(ValueError, match="holds a ddpg run"):
         train("Pendulum-v1", cfg, steps=600, seed=1, out=tmp_path)
+
+
+def test_normalize_obs_scales_what_the_networks_see_by_the_running_statistics(tmp_path):
+    torch.set_num_threads(1)
+    from rlcore.checkpoint import load_checkpoint
+    from rlcore.ddpg import DeterministicPolicy
+    from rlcore.experiments import export_policy
+
+    cfg = Config(normalize_obs=True, **{**SMALL, "learning_starts": 100})
+    result = train("Pendulum-v1", cfg, steps=400, seed=0, out=tmp_path / "run")
+    ckpt = load_checkpoint(tmp_path / "run" / "checkpoint.pt")
+    seen = np.asarray(ckpt["replay"]["next_obs"])[:400]  # every observation a step returned
+    mean, var = np.asarray(ckpt["obs_mean"]), np.asarray(ckpt["obs_var"])
+    np.testing.assert_allclose(mean, seen.mean(0), rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(var, seen.var(0), rtol=1e-3)
+    x = seen[250].astype(np.float64)  # an observation it saw: well inside the +-10 clipping
+    with torch.no_grad():
+        by_hand = result.actor(torch.as_tensor((x - mean) / np.sqrt(var + 1e-8), dtype=torch.float32)[None])[0]
+    raw = DeterministicPolicy(result.actor)(x)
+    for policy in (result.policy, load_policy(ckpt)):
+        np.testing.assert_allclose(policy(x), by_hand.numpy(), rtol=1e-6)
+        assert not np.allclose(policy(x), raw)
+    export_policy(tmp_path / "run" / "checkpoint.pt", tmp_path / "policy.pt")  # what results/ keeps
+    np.testing.assert_allclose(load_policy(load_checkpoint(tmp_path / "policy.pt"))(x), by_hand.numpy(), rtol=1e-6)
