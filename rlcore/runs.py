@@ -169,6 +169,12 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
                 f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} (seed {ckpt.get('seed')}); "
                 "choose another --out folder or delete it."
             )
+        changed = changed_settings(ckpt.get("config", {}), config_dict(config))
+        if changed:
+            raise ValueError(
+                f"{run.root} holds a run with other settings ({'; '.join(changed)}), so resuming it would mix two "
+                "configurations; choose another --out folder, delete it, or run with its settings."
+            )
         from rlcore.logger import drop_rows_after
 
         for log in sorted(run.root.glob("*.csv")):
@@ -184,6 +190,19 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
     write_json(run.config, {"algo": algo, "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
     write_json(run.meta, run_metadata(algo=algo, env_id=env_id, seed=seed, steps=steps, **meta))
     return run, None
+
+
+RESUMABLE_CHANGES = frozenset({"eval_every", "eval_episodes", "checkpoint_every"})
+"""Config fields a resumed run may change: they decide what is logged and saved, not what is learned."""
+
+
+def changed_settings(saved: dict[str, Any], current: dict[str, Any]) -> list[str]:
+    """``"name: saved -> current"`` for every setting both configs have and that differs (JSON-wise, so a tuple
+    equals the list it was saved as), except :data:`RESUMABLE_CHANGES`. Settings newer than a checkpoint are
+    not compared."""
+    norm = lambda v: json.dumps(v, sort_keys=True, default=str)  # noqa: E731
+    return [f"{k}: {saved[k]!r} -> {current[k]!r}" for k in sorted(saved.keys() & current.keys())
+            if k not in RESUMABLE_CHANGES and norm(saved[k]) != norm(current[k])]
 
 
 def config_dict(config: Any) -> dict[str, Any]:

@@ -50,3 +50,19 @@ def test_changes_under_results_do_not_make_a_checkout_dirty(tmp_path, monkeypatc
     assert runs.git_commit(tmp_path) == clean
     (tmp_path / "code.py").write_text("x = 2\n")
     assert runs.git_commit(tmp_path) == clean + "+dirty"
+
+
+def test_a_run_does_not_resume_a_checkpoint_of_other_settings(tmp_path):
+    import pytest
+    import torch
+
+    from rlcore.ddpg import Config, train
+
+    torch.set_num_threads(1)
+    small = dict(hidden=(16,), batch_size=16, learning_starts=50, eval_every=0, checkpoint_every=100)
+    train("Pendulum-v1", Config(**small), steps=100, seed=0, out=tmp_path)
+    with pytest.raises(ValueError, match=r"other settings \(normalize_obs: False -> True\)"):
+        train("Pendulum-v1", Config(normalize_obs=True, **small), steps=200, seed=0, out=tmp_path)
+    # what is only logged or saved may change, and settings a checkpoint predates are not compared
+    assert train("Pendulum-v1", Config(**{**small, "eval_every": 50}), steps=200, seed=0, out=tmp_path).steps == 200
+    assert runs.changed_settings({"hidden": [16], "tau": 0.005}, {"hidden": (16,), "tau": 0.005, "new": 1}) == []
