@@ -27,13 +27,20 @@ EXIT_INTERRUPTED = 130
 
 
 def _parse_value(text: str, annotation: Any) -> Any:
-    """Parse a ``--set key=value`` value as JSON where possible (numbers, true/false, dicts)."""
+    """Parse a ``--set key=value`` value as JSON where possible (numbers, true/false, dicts).
+
+    A tuple field (``hidden``) also takes one number or comma-separated ones: ``hidden=64`` or ``hidden=64,64``.
+    """
+    if typing.get_origin(annotation) is tuple and "," in text and not text.lstrip().startswith("["):
+        text = f"[{text}]"
     try:
         value = json.loads(text)
     except json.JSONDecodeError:
         value = text
     if annotation in (float, "float") and isinstance(value, int):
         value = float(value)
+    if typing.get_origin(annotation) is tuple and not isinstance(value, (list, tuple)):
+        value = [value]
     return value
 
 

@@ -59,6 +59,24 @@ def test_set_overrides_config_fields(tmp_path):
     assert bad.returncode == 2 and "no field 'alpah'" in bad.stderr
 
 
+def test_set_takes_a_network_shape_as_one_number_or_several():
+    from rlcore import ddpg
+    from rlcore.__main__ import _overrides
+
+    for text, hidden in (("16", (16,)), ("64,64", (64, 64)), ("[32, 8]", (32, 8))):
+        assert ddpg.Config(**_overrides(ddpg.Config, [f"hidden={text}"])).hidden == hidden
+    assert _overrides(ddpg.Config, ["normalize_obs=true", "tau=1"]) == {"normalize_obs": True, "tau": 1.0}
+
+
+def test_resuming_with_other_settings_is_one_clear_line(tmp_path):
+    common = ["--env", "Pendulum-v1", "--out", tmp_path, "--set", "learning_starts=50", "--set", "hidden=8",
+              "--no-progress"]
+    rlcore("train", "ddpg", "--steps", 100, *common)
+    bad = rlcore("train", "ddpg", "--steps", 200, *common, "--set", "normalize_obs=true", check=False)
+    assert bad.returncode == 2 and "other settings (normalize_obs: False -> True)" in bad.stderr
+    assert "Traceback" not in bad.stderr
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
