@@ -29,7 +29,7 @@ from torch import nn
 from tqdm import tqdm
 
 from rlcore.buffers import gae
-from rlcore.checkpoint import save_checkpoint
+from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
@@ -322,11 +322,9 @@ def train(
         step, iteration = int(ckpt["step"]), int(ckpt["iteration"])
         torch.set_rng_state(ckpt["torch_rng"])
         if obs_norm is not None:
-            obs_norm.obs_rms.mean, obs_norm.obs_rms.var = np.asarray(ckpt["obs_mean"]), np.asarray(ckpt["obs_var"])
-            obs_norm.obs_rms.count = float(ckpt["obs_count"])
+            load_running_stats(obs_norm.obs_rms, ckpt, "obs")
         if rew_norm is not None:
-            rew_norm.return_rms.mean, rew_norm.return_rms.var = np.asarray(ckpt["ret_mean"]), np.asarray(ckpt["ret_var"])
-            rew_norm.return_rms.count = float(ckpt["ret_count"])
+            load_running_stats(rew_norm.return_rms, ckpt, "ret")
     log = eval_log = upd_log = None
     if run is not None:
         log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length"])
@@ -343,11 +341,9 @@ def train(
                  "torch_rng": torch.get_rng_state(), "spaces": spaces, "obs_clip": 10.0,
                  "obs_mean": None, "obs_var": None}
         if obs_norm is not None:
-            state.update(obs_mean=obs_norm.obs_rms.mean, obs_var=obs_norm.obs_rms.var,
-                         obs_count=float(obs_norm.obs_rms.count))
+            state.update(running_stats_state(obs_norm.obs_rms, "obs"))
         if rew_norm is not None:
-            state.update(ret_mean=rew_norm.return_rms.mean, ret_var=rew_norm.return_rms.var,
-                         ret_count=float(rew_norm.return_rms.count))
+            state.update(running_stats_state(rew_norm.return_rms, "ret"))
         save_checkpoint(run.checkpoint, state)
 
     obs, _ = envs.reset(seed=seed + 1_000 * iteration)

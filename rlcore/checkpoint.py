@@ -95,3 +95,15 @@ def load_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
             "Pass a file written by `python -m rlcore train`."
         )
     return data
+
+
+def running_stats_state(rms: Any, prefix: str) -> dict[str, Any]:
+    """Gymnasium's ``RunningMeanStd`` as checkpoint entries ``{prefix}_mean``, ``{prefix}_var``, ``{prefix}_count``."""
+    return {f"{prefix}_mean": rms.mean, f"{prefix}_var": rms.var, f"{prefix}_count": float(rms.count)}
+
+
+def load_running_stats(rms: Any, ckpt: dict[str, Any], prefix: str) -> None:
+    """Restore into ``rms`` what :func:`running_stats_state` saved under ``prefix``, in ``rms``'s own dtype."""
+    rms.mean = np.asarray(ckpt[f"{prefix}_mean"]).astype(rms.mean.dtype)
+    rms.var = np.asarray(ckpt[f"{prefix}_var"]).astype(rms.var.dtype)
+    rms.count = float(ckpt[f"{prefix}_count"])

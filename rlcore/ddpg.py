@@ -26,7 +26,7 @@ from torch import nn
 from tqdm import tqdm
 
 from rlcore.buffers import ReplayBuffer
-from rlcore.checkpoint import save_checkpoint
+from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
 from rlcore.dqn import soft_update
 from rlcore.envs import make_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
@@ -141,7 +141,8 @@ class DeterministicPolicy:
 
     def __init__(self, actor: nn.Module, obs_mean=None, obs_var=None):
         self.actor = actor.eval()
-        self.obs_mean, self.obs_var = obs_mean, obs_var
+        self.obs_mean = None if obs_mean is None else np.asarray(obs_mean)
+        self.obs_var = None if obs_var is None else np.asarray(obs_var)
 
     def __call__(self, obs):
         x = obs if self.obs_mean is None else normalize_observation(obs, self.obs_mean, self.obs_var)
@@ -224,8 +225,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
             buffer.load_state_dict(ckpt["replay"])
         step, episode = int(ckpt["step"]), int(ckpt["episode"])
         if obs_rms is not None:
-            obs_rms.mean, obs_rms.var = np.asarray(ckpt["obs_mean"]), np.asarray(ckpt["obs_var"])
-            obs_rms.count = float(ckpt["obs_count"])
+            load_running_stats(obs_rms, ckpt, "obs")
         rng.bit_generator.state = ckpt["rng"]
         torch.set_rng_state(ckpt["torch_rng"])
         if "noise" in ckpt:  # the noise's generator and state: the run continues as if never stopped
@@ -259,7 +259,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
             if src is not None:
                 state["noise"] = src.state_dict()
         if obs_rms is not None:
-            state.update(obs_mean=obs_rms.mean, obs_var=obs_rms.var, obs_count=float(obs_rms.count))
+            state.update(running_stats_state(obs_rms, "obs"))
         if config.replay_in_checkpoint:
             state["replay"] = buffer.state_dict()
         save_checkpoint(run.checkpoint, state)
@@ -356,6 +356,4 @@ def load_policy(ckpt: dict[str, Any]) -> DeterministicPolicy:
     config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
     actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
     actor.load_state_dict(ckpt["actor"])
-    if ckpt.get("obs_mean") is None:
-        return DeterministicPolicy(actor)
-    return DeterministicPolicy(actor, np.asarray(ckpt["obs_mean"]), np.asarray(ckpt["obs_var"]))
+    return DeterministicPolicy(actor, ckpt.get("obs_mean"), ckpt.get("obs_var"))

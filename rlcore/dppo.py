@@ -68,7 +68,8 @@ from torch.nn.parallel import DistributedDataParallel
 from tqdm import tqdm
 
 from rlcore import ppo
-from rlcore.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from rlcore.checkpoint import (CheckpointError, load_checkpoint, load_running_stats, running_stats_state,
+                               save_checkpoint)
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
@@ -283,14 +284,9 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
         optimizer.load_state_dict(ckpt["optimizer"])
         step, iteration, kl_coef = int(ckpt["step"]), int(ckpt["iteration"]), float(ckpt["kl_coef"])
         if obs_norm is not None:
-            rms = obs_norm.obs_rms
-            rms.mean = np.asarray(ckpt["obs_mean"]).astype(rms.mean.dtype)
-            rms.var = np.asarray(ckpt["obs_var"]).astype(rms.var.dtype)
-            rms.count = float(ckpt["obs_count"])
+            load_running_stats(obs_norm.obs_rms, ckpt, "obs")
         if rew_norm is not None:
-            rew_norm.return_rms.mean = np.asarray(ckpt["ret_mean"])
-            rew_norm.return_rms.var = np.asarray(ckpt["ret_var"])
-            rew_norm.return_rms.count = float(ckpt["ret_count"])
+            load_running_stats(rew_norm.return_rms, ckpt, "ret")
     if ckpt is None:
         # rank 0 continues the initialization's stream, as ppo.train does: one worker is ppo.train
         rng = np.random.default_rng(worker_seed)
@@ -324,13 +320,11 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
                  "agent": agent.state_dict(), "optimizer": optimizer.state_dict(), "kl_coef": kl_coef,
                  "spaces": spaces, "obs_clip": 10.0, "distributed": distributed}
         if obs_norm is not None:
-            state.update(obs_mean=obs_norm.obs_rms.mean, obs_var=obs_norm.obs_rms.var,
-                         obs_count=float(obs_norm.obs_rms.count))
+            state.update(running_stats_state(obs_norm.obs_rms, "obs"))
         else:
             state.update(obs_mean=None, obs_var=None)
         if rew_norm is not None:
-            state.update(ret_mean=rew_norm.return_rms.mean, ret_var=rew_norm.return_rms.var,
-                         ret_count=float(rew_norm.return_rms.count))
+            state.update(running_stats_state(rew_norm.return_rms, "ret"))
         save_checkpoint(run.checkpoint, state)
 
     buf = Rollout(spaces, config)
