@@ -125,8 +125,15 @@ def test_ddpg_sweep_arms_change_one_setting_of_the_report_table_and_modern_runs_
         changed = {f for f in Config.__dataclass_fields__ if getattr(a, f) != getattr(b, f)}
         assert changed == expected[arm.name], (arm.name, changed)
         assert (arm.steps, arm.seeds, arm.algo) == (ref.steps, ref.seeds, "ddpg")
-    modern = ex.get_experiment("ddpg-modern").runs[0]
-    assert Config(**modern.overrides).hidden == Config().hidden and modern.steps == base["HalfCheetah-v5"].steps
+    modern_runs = ex.get_experiment("ddpg-modern").runs
+    # the report's tasks and budgets, with Config's defaults: only the settings differ from ddpg-report
+    assert [r.name for r in modern_runs] == ["halfcheetah", "hopper", "ant"]
+    for run in modern_runs:
+        assert (run.env_id, run.steps, run.seeds) == (base[run.env_id].env_id, base[run.env_id].steps, (0, 1, 2))
+        cfg = Config(**run.overrides)
+        assert {f for f in Config.__dataclass_fields__ if getattr(cfg, f) != getattr(Config(), f)} <= {
+            "eval_every", "eval_episodes", "checkpoint_every"}
+    modern = modern_runs[0]
     long = {r.name: r for r in ex.get_experiment("ddpg-modern-1m").runs}  # the same settings, trained to 1M steps
     assert sorted(long) == ["halfcheetah", "humanoid"] and long["humanoid"].env_id == "Humanoid-v5"
     for run in long.values():
