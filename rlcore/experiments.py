@@ -25,7 +25,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -380,14 +380,32 @@ def _train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: 
                 lines.append(train_one(name, spec, s, results, work))
                 bar.update(1)
         else:
-            # spawn, not fork: safe from a Jupyter kernel, whose threads a fork would copy half-way
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-                futures = [pool.submit(train_one, name, spec, s, results, work) for spec, s in tasks]
-                for fut in as_completed(futures):
-                    lines.append(fut.result())
-                    bar.update(1)
+            for line in run_in_pool(train_one, [(name, spec, s, results, work) for spec, s in tasks], jobs):
+                lines.append(line)
+                bar.update(1)
     return lines
+
+
+def run_in_pool(fn: Callable[..., Any], calls: list[tuple], jobs: int):
+    """Yield ``fn(*args)`` for each of ``calls``, ``jobs`` processes at a time, as each finishes.
+
+    A call is handed to a worker only when one is free, so that when one fails, or Ctrl-C interrupts the run
+    (the workers checkpoint and stop on their own SIGINT), no further call starts: the error is raised once the
+    calls already running have returned. (Submitting everything at once would queue calls that a pool runs even
+    after an interrupt.)
+    """
+    # spawn, not fork: safe from a Jupyter kernel, whose threads a fork would copy half-way
+    ctx = multiprocessing.get_context("spawn")
+    todo = list(calls)
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+        running = {pool.submit(fn, *todo.pop(0)) for _ in range(min(jobs, len(todo)))}
+        while running:
+            done, running = wait(running, return_when=FIRST_COMPLETED)
+            for fut in done:
+                result = fut.result()  # raises: nothing new is submitted, the with-block waits for the rest
+                if todo:
+                    running.add(pool.submit(fn, *todo.pop(0)))
+                yield result
 
 
 def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,

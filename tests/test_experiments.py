@@ -1,5 +1,7 @@
 import json
 import shutil
+import time
+from pathlib import Path
 
 import numpy as np
 
@@ -20,6 +22,24 @@ def tiny(monkeypatch):
     ))
     monkeypatch.setitem(ex.EXPERIMENTS, "tiny", lambda: exp)
     return exp
+
+
+def _mark_or_fail(folder, i):
+    """A stand-in for one seed's training, in a pool worker: call 0 fails at once, the others leave a mark."""
+    if i == 0:
+        raise RuntimeError("seed 0 failed")
+    time.sleep(1.0)
+    (Path(folder) / f"ran-{i}").touch()
+    return i
+
+
+def test_pool_starts_nothing_new_after_a_failure(tmp_path):
+    # two workers: call 0 fails while call 1 runs; calls 2 and 3 must never start (an interrupted run stops too),
+    # while call 1, already running, is waited for
+    with pytest.raises(RuntimeError, match="seed 0 failed"):
+        list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in range(4)], jobs=2))
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["ran-1"]
+    assert list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in (3, 2)], jobs=2)) in ([3, 2], [2, 3])
 
 
 def test_run_writes_small_results_and_is_resumable(tiny, tmp_path):
