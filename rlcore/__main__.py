@@ -16,7 +16,6 @@ import argparse
 import dataclasses
 import json
 import os
-import signal
 import sys
 import typing
 from pathlib import Path
@@ -199,12 +198,10 @@ def main(argv: list[str] | None = None) -> int:
     from rlcore.envs import UnknownEnvironmentError
     from rlcore.render import HeadlessGLError
 
+    from rlcore.runs import stop_on_signals
+
     args = build_parser().parse_args(argv)
-    # A `kill` (SIGTERM, e.g. from a job scheduler) ends a run like Ctrl-C does: checkpoint first. SIGINT too, even
-    # where it arrives ignored: a shell starts background jobs (`cmd &`) with SIGINT ignored, and Python then keeps
-    # it ignored, so `kill -INT` would do nothing to such a run.
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    stop_on_signals()  # a `kill` (SIGTERM) or Ctrl-C: checkpoint, then stop
     try:
         return args.func(args)
     except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:

@@ -23,6 +23,7 @@ import json
 import multiprocessing
 import os
 import shutil
+import signal
 import tempfile
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -389,23 +390,31 @@ def _train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: 
 def run_in_pool(fn: Callable[..., Any], calls: list[tuple], jobs: int):
     """Yield ``fn(*args)`` for each of ``calls``, ``jobs`` processes at a time, as each finishes.
 
-    A call is handed to a worker only when one is free, so that when one fails, or Ctrl-C interrupts the run
-    (the workers checkpoint and stop on their own SIGINT), no further call starts: the error is raised once the
-    calls already running have returned. (Submitting everything at once would queue calls that a pool runs even
-    after an interrupt.)
+    A call is handed to a worker only when one is free, so that when one fails, or the run is interrupted, no
+    further call starts: the error is raised once the calls already running have returned. (Submitting
+    everything at once would queue calls that a pool runs even after an interrupt.) An interrupt of this
+    process (Ctrl-C, or SIGTERM with :func:`rlcore.runs.stop_on_signals`) is passed on to the workers as SIGINT:
+    each running ``train`` saves a checkpoint and stops, instead of training on to the end of its seed.
     """
+    from rlcore.runs import stop_on_signals
+
     # spawn, not fork: safe from a Jupyter kernel, whose threads a fork would copy half-way
     ctx = multiprocessing.get_context("spawn")
     todo = list(calls)
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=stop_on_signals, initargs=(True,)) as pool:
         running = {pool.submit(fn, *todo.pop(0)) for _ in range(min(jobs, len(todo)))}
-        while running:
-            done, running = wait(running, return_when=FIRST_COMPLETED)
-            for fut in done:
-                result = fut.result()  # raises: nothing new is submitted, the with-block waits for the rest
-                if todo:
-                    running.add(pool.submit(fn, *todo.pop(0)))
-                yield result
+        try:
+            while running:
+                done, running = wait(running, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    result = fut.result()  # raises: nothing new is submitted, the with-block waits for the rest
+                    if todo:
+                        running.add(pool.submit(fn, *todo.pop(0)))
+                    yield result
+        except (KeyboardInterrupt, GeneratorExit):  # interrupted, or the caller stopped asking for results
+            for child in multiprocessing.active_children():  # the pool's workers
+                os.kill(child.pid, signal.SIGINT)
+            raise
 
 
 def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,

@@ -18,6 +18,7 @@ import json
 import os
 import platform
 import shlex
+import signal
 import subprocess
 import sys
 import tempfile
@@ -49,6 +50,25 @@ class RunDir:
     @property
     def checkpoint(self) -> Path:
         return self.root / "checkpoint.pt"
+
+
+def stop_on_signals(once: bool = False) -> None:
+    """Make SIGTERM (a ``kill``, a job scheduler) and SIGINT end a run as Ctrl-C does: a KeyboardInterrupt, on
+    which every ``train`` saves a checkpoint before it stops.
+
+    SIGINT is set too, even where it arrives ignored: a shell starts background jobs (``cmd &``) with SIGINT
+    ignored, and Python then keeps it ignored, so ``kill -INT`` would do nothing to such a run. With ``once``
+    (pool workers, which may receive Ctrl-C from the terminal and the parent's forwarded signal both), the first
+    signal interrupts and later ones are ignored, so that the checkpoint it triggers is not cut short.
+    """
+    def interrupt(signum: int, frame: Any) -> None:
+        if once:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, interrupt if once else signal.default_int_handler)
 
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:

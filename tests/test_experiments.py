@@ -1,5 +1,9 @@
 import json
+import os
 import shutil
+import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -40,6 +44,59 @@ def test_pool_starts_nothing_new_after_a_failure(tmp_path):
         list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in range(4)], jobs=2))
     assert sorted(f.name for f in tmp_path.iterdir()) == ["ran-1"]
     assert list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in (3, 2)], jobs=2)) in ([3, 2], [2, 3])
+
+
+def _signal_self(sig):
+    """In a pool worker: a signal to itself must interrupt (as Ctrl-C does), and a second one be ignored."""
+    try:
+        os.kill(os.getpid(), sig)
+        time.sleep(5)
+        return "not interrupted"
+    except KeyboardInterrupt:
+        os.kill(os.getpid(), sig)  # ignored: a checkpoint in progress is not cut short
+        time.sleep(0.2)
+        return "interrupted once"
+
+
+def test_pool_workers_turn_sigterm_into_an_interrupt():
+    # without the workers' handler, SIGTERM would kill the worker (BrokenProcessPool) before any checkpoint
+    calls = [(signal.SIGTERM,), (signal.SIGINT,)]
+    assert list(ex.run_in_pool(_signal_self, calls, jobs=2)) == ["interrupted once"] * 2
+
+
+def _train_until_interrupted(folder, i):
+    """A stand-in for a long training run that checkpoints when interrupted."""
+    (Path(folder) / f"started-{i}").touch()
+    try:
+        time.sleep(120)
+    except KeyboardInterrupt:
+        (Path(folder) / f"checkpointed-{i}").touch()
+        raise
+
+
+def pool_main(folder):  # run in a subprocess by the test below, as `experiments run --jobs 2` would
+    from rlcore.runs import stop_on_signals
+
+    stop_on_signals()
+    try:
+        list(ex.run_in_pool(_train_until_interrupted, [(folder, i) for i in range(3)], jobs=2))
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+
+
+def test_killing_the_parent_stops_and_checkpoints_the_workers(tmp_path):
+    # `kill PID` of `experiments run --jobs 2` (its workers not signalled): both running seeds checkpoint and stop
+    # at once, and the third never starts; before, the parent waited for the running seeds to train to the end
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import test_experiments as t; "
+            f"t.pool_main({str(tmp_path)!r})")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while len(list(tmp_path.glob("started-*"))) < 2 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=30)
+    assert out.strip() == "interrupted" and proc.returncode == 0
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["checkpointed-0", "checkpointed-1", "started-0", "started-1"]
 
 
 def test_run_writes_small_results_and_is_resumable(tiny, tmp_path):
