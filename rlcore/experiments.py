@@ -152,10 +152,10 @@ _REPORT_DDPG_COMMON = {"actor_lr": 1e-4, "critic_lr": 1e-3, "gamma": 0.99, "expl
                        "noise_sigma": 0.3, "eval_every": 10_000, "eval_episodes": 5, "checkpoint_every": 50_000}
 
 
-# Seeds of the report's DDPG runs and of the comparisons around them, per task: 5 (seeds 0-2 came first; 3 and 4
-# were added later with `--seeds 3,4`).
+# Seeds of the report's DDPG runs and of the comparisons around them, per task: 5 on HalfCheetah and Ant (seeds 0-2
+# came first; 3 and 4 were added later with `--seeds 3,4`), 3 on Hopper, whose three arms did not fit then.
 REPORT_DDPG_SEEDS: dict[str, tuple[int, ...]] = {"Ant-v5": (0, 1, 2, 3, 4), "HalfCheetah-v5": (0, 1, 2, 3, 4),
-                                                 "Hopper-v5": (0, 1, 2, 3, 4)}
+                                                 "Hopper-v5": (0, 1, 2)}
 
 
 def _ddpg_report() -> Experiment:
