@@ -27,12 +27,13 @@ from tqdm import tqdm
 
 from rlcore.buffers import ReplayBuffer
 from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
+from rlcore.config import check_config
 from rlcore.dqn import soft_update
 from rlcore.envs import make_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.nets import mlp
-from rlcore.noise import AdaptiveParamNoise, GaussianNoise, OrnsteinUhlenbeckNoise, action_distance
+from rlcore.noise import AdaptiveParamNoise, GaussianNoise, OrnsteinUhlenbeckNoise
 from rlcore.runs import config_dict, episode_seed, open_run
 
 POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
@@ -89,7 +90,7 @@ class Config:
     """Keyword arguments for ``gymnasium.make``."""
 
     def __post_init__(self) -> None:
-        self.hidden = tuple(int(h) for h in self.hidden)
+        check_config(self)
         if self.exploration not in EXPLORATION:
             raise ValueError(f"exploration must be one of {EXPLORATION}, got {self.exploration!r}")
 
@@ -134,6 +135,34 @@ def critic_loss(critic: nn.Module, obs: torch.Tensor, actions: torch.Tensor, y: 
 def actor_loss(actor: nn.Module, critic: nn.Module, obs: torch.Tensor) -> torch.Tensor:
     """-(1/N) sum_i Q(s_i, mu(s_i)): its gradient is the deterministic policy gradient, through the critic."""
     return -critic(obs, actor(obs)).mean()
+
+
+# [ddpg-update]
+def update_critic(critic: nn.Module, critic_opt: torch.optim.Optimizer, actor_t: nn.Module, critic_t: nn.Module,
+                  obs: torch.Tensor, actions: torch.Tensor, rewards: torch.Tensor, next_obs: torch.Tensor,
+                  terminated: torch.Tensor, gamma: float) -> float:
+    """One Adam step on the critic's loss (1/N) sum (y_i - Q(s_i, a_i))^2, with y from the target networks."""
+    y = critic_target(actor_t, critic_t, next_obs, rewards, terminated, gamma)
+    loss = critic_loss(critic, obs, actions, y)
+    critic_opt.zero_grad(set_to_none=True)
+    loss.backward()
+    critic_opt.step()
+    return float(loss.detach())
+
+
+def update_actor(actor: nn.Module, actor_opt: torch.optim.Optimizer, critic: nn.Module, obs: torch.Tensor) -> float:
+    """One Adam step along the deterministic policy gradient: the gradient flows through the critic into the actor
+    only (the critic's weights get none: the next critic update would throw it away, so skipping it saves time)."""
+    critic.requires_grad_(False)
+    try:
+        loss = actor_loss(actor, critic, obs)
+        actor_opt.zero_grad(set_to_none=True)
+        loss.backward()
+    finally:
+        critic.requires_grad_(True)
+    actor_opt.step()
+    return float(loss.detach())
+# [/ddpg-update]
 
 
 class DeterministicPolicy:
@@ -301,26 +330,16 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 if noise is not None:
                     noise.reset()
                 if param_noise is not None and len(buffer) >= config.batch_size:
-                    states = scaled(buffer.sample(config.batch_size).obs)
-                    param_noise.adapt(action_distance(actor, behaviour, states))
+                    # adapt sigma on a fresh perturbation of the current actor, then perturb the next behaviour
+                    param_noise.adapt_to(actor, scaled(buffer.sample(config.batch_size).obs))
                     behaviour = param_noise.perturb(actor)
             if step >= config.learning_starts:
                 b = buffer.sample(config.batch_size)
-                o, a, r = scaled(b.obs), torch.as_tensor(b.actions), torch.as_tensor(b.rewards)
-                o2, term = scaled(b.next_obs), torch.as_tensor(b.terminated)
-                y = critic_target(actor_t, critic_t, o2, r, term, config.gamma)
-                loss_q = critic_loss(critic, o, a, y)
-                critic_opt.zero_grad(set_to_none=True)
-                loss_q.backward()
-                critic_opt.step()
-                # the actor's gradient flows through the critic, but not into the critic's weights
-                # (their gradients would be thrown away by the next critic update: skipping them saves time)
-                critic.requires_grad_(False)
-                loss_pi = actor_loss(actor, critic, o)
-                actor_opt.zero_grad(set_to_none=True)
-                loss_pi.backward()
-                critic.requires_grad_(True)
-                actor_opt.step()
+                o = scaled(b.obs)
+                update_critic(critic, critic_opt, actor_t, critic_t, o, torch.as_tensor(b.actions),
+                              torch.as_tensor(b.rewards), scaled(b.next_obs), torch.as_tensor(b.terminated),
+                              config.gamma)
+                update_actor(actor, actor_opt, critic, o)
                 soft_update(actor_t, actor, config.tau)
                 soft_update(critic_t, critic, config.tau)
             if config.eval_every and step % config.eval_every == 0:

@@ -6,7 +6,9 @@
   (Lillicrap et al. 2016).
 - :class:`AdaptiveParamNoise`: perturb the actor's *weights* instead of its actions, with a scale adapted
   so that the perturbed actor's actions stay about ``target_distance`` away from the unperturbed ones
-  (Plappert et al. 2018).
+  (Plappert et al. 2018). The distance is measured on a fresh perturbation of the *current* actor, as in
+  OpenAI Baselines' ``adapt_param_noise``: the behaviour policy of the episode that just ended was perturbed from
+  an older actor, and its distance would also count the training in between.
 """
 
 from __future__ import annotations
@@ -78,8 +80,10 @@ def action_distance(actor_a: torch.nn.Module, actor_b: torch.nn.Module, obs: tor
 class AdaptiveParamNoise:
     """A perturbed copy of the actor, theta~ = theta + N(0, sigma^2), with sigma adapted to a target distance.
 
-    ``adapt(distance)``: sigma <- sigma / alpha if the perturbed actions are farther than the target,
-    sigma * alpha otherwise.
+    At each episode's end: :meth:`adapt_to` perturbs a separate copy of the current actor with the current sigma,
+    measures d = distance(mu(s), mu~(s)) on a minibatch of states, and moves sigma (``adapt``: sigma <- sigma / alpha
+    if d is above the target, sigma * alpha otherwise); then :meth:`perturb` makes the next episode's behaviour
+    policy from the current actor with the new sigma.
     """
 
     def __init__(self, initial_sigma: float = 0.1, target_distance: float = 0.2, alpha: float = 1.01,
@@ -90,11 +94,24 @@ class AdaptiveParamNoise:
 
     def perturb(self, actor: torch.nn.Module) -> torch.nn.Module:
         """A fresh perturbed copy of ``actor`` (call at the start of each episode)."""
-        self.perturbed = copy.deepcopy(actor)
-        with torch.no_grad():
-            for p in self.perturbed.parameters():
-                p.add_(torch.randn(p.shape, generator=self.generator) * self.sigma)
+        self.perturbed = self.perturbed_copy(actor)
         return self.perturbed
+
+    def perturbed_copy(self, actor: torch.nn.Module) -> torch.nn.Module:
+        """theta + N(0, sigma^2 I): a perturbed copy of ``actor`` (the behaviour policy is left as it is)."""
+        copy_ = copy.deepcopy(actor)
+        with torch.no_grad():
+            for p in copy_.parameters():
+                p.add_(torch.randn(p.shape, generator=self.generator) * self.sigma)
+        return copy_
+
+    # [param-noise-adapt]
+    def adapt_to(self, actor: torch.nn.Module, states: torch.Tensor) -> float:
+        """Adapt sigma to the distance a perturbation of the *current* actor makes on ``states``; returns it."""
+        distance = action_distance(actor, self.perturbed_copy(actor), states)
+        self.adapt(distance)
+        return distance
+    # [/param-noise-adapt]
 
     def adapt(self, distance: float) -> float:
         """Move sigma toward the target action distance; returns the new sigma."""

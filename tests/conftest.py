@@ -3,6 +3,14 @@
 import pytest
 
 
+@pytest.fixture(autouse=True, scope="session")
+def one_torch_thread():
+    """The book's networks are small: one torch thread is fastest, and it leaves the other core to the rest."""
+    import torch
+
+    torch.set_num_threads(1)
+
+
 @pytest.fixture
 def scaling_record():
     """A small record in the format of benchmarks/dppo_scaling.py."""

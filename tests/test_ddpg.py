@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 import torch
 
-from rlcore.ddpg import Actor, Config, Critic, actor_loss, critic_loss, critic_target, load_policy, train
+from rlcore.ddpg import (Actor, Config, Critic, actor_loss, critic_loss, critic_target, load_policy, train,
+                         update_actor, update_critic)
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 
@@ -44,8 +45,28 @@ def test_losses_by_hand():
 def test_actor_gradient_flows_through_the_critic_only_into_the_actor():
     torch.manual_seed(0)
     actor, critic = Actor(3, 2, (8,), [-1, -1], [1, 1]), Critic(3, 2, (8,))
-    actor_loss(actor, critic, torch.randn(5, 3)).backward()
+    critic_before = [p.detach().clone() for p in critic.parameters()]
+    actor_before = [p.detach().clone() for p in actor.parameters()]
+    update_actor(actor, torch.optim.Adam(actor.parameters(), lr=1e-2), critic, torch.randn(5, 3))
     assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in actor.parameters())
+    assert all(not torch.equal(p, q) for p, q in zip(actor.parameters(), actor_before))
+    assert all(p.grad is None for p in critic.parameters())  # no gradient reached the critic's weights
+    assert all(torch.equal(p, q) for p, q in zip(critic.parameters(), critic_before))
+    assert all(p.requires_grad for p in critic.parameters())  # ... and the critic trains again afterwards
+
+
+def test_update_critic_moves_q_toward_the_target():
+    torch.manual_seed(0)
+    actor, critic = Actor(3, 1, (16,), [-1], [1]), Critic(3, 1, (16,))
+    actor_t, critic_t = Actor(3, 1, (16,), [-1], [1]), Critic(3, 1, (16,))
+    opt = torch.optim.SGD(critic.parameters(), lr=0.05)
+    obs, act, next_obs = torch.randn(32, 3), torch.rand(32, 1) * 2 - 1, torch.randn(32, 3)
+    rew, term = torch.randn(32), (torch.rand(32) < 0.3).float()
+    y = critic_target(actor_t, critic_t, next_obs, rew, term, 0.9)
+    before = critic_loss(critic, obs, act, y).item()
+    loss = update_critic(critic, opt, actor_t, critic_t, obs, act, rew, next_obs, term, 0.9)
+    assert loss == pytest.approx(before)
+    assert critic_loss(critic, obs, act, y).item() < before
 
 
 def test_actor_respects_the_action_box():
@@ -87,9 +108,22 @@ def test_every_exploration_runs_and_logs(exploration, tmp_path):
 
     prog = read_csv(tmp_path / "progress.csv")
     assert len(prog["episode"]) == 3  # Pendulum episodes are 200 steps
-    if exploration == "param":
-        assert prog["noise_sigma"][-1] != pytest.approx(0.1)  # the scale adapted
+    if exploration == "param":  # the default target is a tenth of the half-range: sigma moved off its start
+        assert prog["noise_sigma"][-1] != pytest.approx(0.1)
     assert read_csv(tmp_path / "eval.csv")["step"].tolist() == [300, 600]
+
+
+@pytest.mark.parametrize("target,direction", [(100.0, 1), (1e-9, -1)])
+def test_param_noise_sigma_moves_toward_its_target_in_training(tmp_path, target, direction):
+    """A target no perturbation can reach makes sigma grow by alpha at every episode's end; one every perturbation
+    exceeds makes it shrink: each logged row (before that episode's adaptation) shows which way it went."""
+    cfg = Config(exploration="param", noise_sigma=0.1, param_noise_target=target,
+                 **{**SMALL, "learning_starts": 100})
+    train("Pendulum-v1", cfg, steps=800, seed=0, out=tmp_path)
+    from rlcore.logger import read_csv
+
+    sigma = read_csv(tmp_path / "progress.csv")["noise_sigma"]
+    np.testing.assert_allclose(sigma, 0.1 * 1.01 ** (direction * np.arange(4)), rtol=1e-9)
 
 
 def test_reward_scale_does_not_change_the_logged_returns(tmp_path):

@@ -49,7 +49,55 @@ def test_param_noise_adapts_its_scale_toward_the_target_distance():
             noise.adapt(d)
         dists = [action_distance(actor, noise.perturb(actor), obs) for _ in range(20)]
         assert np.mean(dists) == pytest.approx(0.1, rel=0.5)
-    assert noise.adapt(1.0) < noise.adapt(0.0) * 1.2  # farther than target shrinks sigma
+    sigma = noise.sigma
+    assert noise.adapt(1.0) == pytest.approx(sigma / 1.1)  # farther than the target: sigma shrinks by alpha
+    assert noise.adapt(0.0) == pytest.approx(sigma)  # nearer: it grows by alpha
+
+
+def _adapt_while_training(rule: str, rounds: int = 150):
+    """An actor that keeps training between adaptations (a new regression target each 'episode'), with parameter
+    noise adapted by ``rule``: ``fixed`` (a fresh perturbation of the current actor) or ``stale`` (the old rule:
+    the behaviour policy perturbed at the episode's start, measured against the trained actor)."""
+    torch.manual_seed(0)
+    actor = torch.nn.Sequential(torch.nn.Linear(3, 32), torch.nn.Tanh(), torch.nn.Linear(32, 2), torch.nn.Tanh())
+    opt = torch.optim.SGD(actor.parameters(), lr=0.5)
+    obs = torch.randn(256, 3)
+    noise = AdaptiveParamNoise(initial_sigma=0.05, target_distance=0.1, alpha=1.05, seed=0)
+    behaviour = noise.perturb(actor)
+    for _ in range(rounds):
+        goal = torch.tanh(torch.randn(256, 2))
+        for _ in range(5):  # an episode of training moves the actor
+            opt.zero_grad()
+            ((actor(obs) - goal) ** 2).mean().backward()
+            opt.step()
+        if rule == "fixed":
+            noise.adapt_to(actor, obs)
+        else:
+            noise.adapt(action_distance(actor, behaviour, obs))
+        behaviour = noise.perturb(actor)
+    fresh = [action_distance(actor, noise.perturbed_copy(actor), obs) for _ in range(20)]
+    return noise.sigma, float(np.mean(fresh))
+
+
+def test_param_noise_holds_its_distance_while_the_actor_trains():
+    sigma_fixed, distance_fixed = _adapt_while_training("fixed")
+    sigma_stale, distance_stale = _adapt_while_training("stale")
+    # the stale rule counts the training drift as perturbation and pushes sigma down, episode after episode
+    assert sigma_stale < 0.05 / 20 and distance_stale < 0.1 / 5
+    # the fixed rule keeps a fresh perturbation about target_distance away
+    assert distance_fixed == pytest.approx(0.1, rel=0.3)
+    assert sigma_fixed > 10 * sigma_stale
+
+
+def test_adapt_to_leaves_the_behaviour_policy_alone():
+    actor = torch.nn.Linear(3, 2)
+    noise = AdaptiveParamNoise(0.1, target_distance=0.05, seed=0)
+    behaviour = noise.perturb(actor)
+    weights = behaviour.weight.detach().clone()
+    before = noise.sigma
+    d = noise.adapt_to(actor, torch.randn(64, 3))
+    assert noise.perturbed is behaviour and torch.equal(behaviour.weight, weights)
+    assert noise.sigma == pytest.approx(before / noise.alpha if d > 0.05 else before * noise.alpha)
 
 
 def test_perturbation_changes_weights_but_not_the_original():
