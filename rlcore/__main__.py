@@ -13,49 +13,13 @@ are printed as one clear message with exit code 2, not a traceback.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import sys
-import typing
 from pathlib import Path
-from typing import Any
 
-EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
-
-
-def _parse_value(text: str, annotation: Any) -> Any:
-    """Parse a ``--set key=value`` value as JSON where possible (numbers, true/false, dicts).
-
-    A tuple field (``hidden``) also takes one number or comma-separated ones: ``hidden=64`` or ``hidden=64,64``.
-    """
-    if typing.get_origin(annotation) is tuple and "," in text and not text.lstrip().startswith("["):
-        text = f"[{text}]"
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError:
-        value = text
-    if annotation in (float, "float") and isinstance(value, int):
-        value = float(value)
-    if typing.get_origin(annotation) is tuple and not isinstance(value, (list, tuple)):
-        value = [value]
-    return value
-
-
-def _overrides(config_cls: type, pairs: list[str]) -> dict[str, Any]:
-    hints = typing.get_type_hints(config_cls)
-    fields = {f.name for f in dataclasses.fields(config_cls)}
-    out: dict[str, Any] = {}
-    for pair in pairs:
-        if "=" not in pair:
-            raise ValueError(f"--set expects key=value, got {pair!r}")
-        key, text = pair.split("=", 1)
-        key = key.strip().replace("-", "_")
-        if key not in fields:
-            raise ValueError(f"{config_cls.__module__}.Config has no field {key!r}; fields: {', '.join(sorted(fields))}")
-        out[key] = _parse_value(text, hints.get(key))
-    return out
+from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, json_object, seed_list
+from rlcore.cli import overrides as overrides_of
 
 
 def _load_run(run_dir: str):
@@ -76,9 +40,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     module = get_algorithm(args.algo)
     check_env_id(args.env)
-    overrides = _overrides(module.Config, args.set or [])
-    if args.env_kwargs:
-        overrides["env_kwargs"] = json.loads(args.env_kwargs)
+    overrides = overrides_of(module.Config, args.set or [])
+    if args.env_kwargs is not None:
+        overrides["env_kwargs"] = args.env_kwargs
     config = module.make_config(args.algo, **overrides)
     import torch
 
@@ -133,9 +97,8 @@ def cmd_experiments(args: argparse.Namespace) -> int:
         raise ValueError(f"experiments {args.action} needs an experiment name; see `python -m rlcore experiments list`")
     results = Path(args.results)
     if args.action == "run":
-        seeds = [int(s) for s in args.seeds.split(",")] if args.seeds else None
         try:
-            lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=seeds,
+            lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
                                       results=results, work=Path(args.work))
         except KeyboardInterrupt:
             print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
@@ -149,33 +112,33 @@ def cmd_experiments(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     from rlcore.algos import ALGORITHMS
 
-    p = argparse.ArgumentParser(prog="python -m rlcore", description="Train, evaluate and render rlcore agents.")
-    sub = p.add_subparsers(dest="command", required=True)
+    p = Parser(prog="python -m rlcore", description="Train, evaluate and render rlcore agents.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     t = sub.add_parser("train", help="train an agent and write its run folder")
     t.add_argument("algo", help=f"one of: {', '.join(sorted(ALGORITHMS))}")
     t.add_argument("--env", required=True, help="Gymnasium environment id, e.g. FrozenLake-v1")
-    t.add_argument("--steps", type=int, required=True, help="environment steps to train for")
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--steps", type=count(1), required=True, help="environment steps to train for")
+    t.add_argument("--seed", type=count(0), default=0)
     t.add_argument("--out", required=True, help="run folder (config, progress.csv, checkpoint.pt)")
     t.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a Config field (repeatable)")
-    t.add_argument("--env-kwargs", help='JSON keyword arguments for gymnasium.make, e.g. \'{"is_slippery": false}\'')
+    t.add_argument("--env-kwargs", type=json_object, help='JSON keyword arguments for gymnasium.make, e.g. \'{"is_slippery": false}\'')
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
 
     e = sub.add_parser("evaluate", help="evaluate the deterministic policy of a run")
     e.add_argument("run", help="run folder (or its checkpoint.pt)")
-    e.add_argument("--episodes", type=int, default=10)
-    e.add_argument("--seed", type=int, default=10_000, help="seed of the first evaluation episode")
-    e.add_argument("--max-steps", type=int, default=None, help="cap on steps per episode")
+    e.add_argument("--episodes", type=count(1), default=10)
+    e.add_argument("--seed", type=count(0), default=10_000, help="seed of the first evaluation episode")
+    e.add_argument("--max-steps", type=count(1), default=None, help="cap on steps per episode")
     e.set_defaults(func=cmd_evaluate)
 
     r = sub.add_parser("render", help="render the deterministic policy of a run to a GIF")
     r.add_argument("run", help="run folder (or its checkpoint.pt)")
     r.add_argument("--out", required=True, help="GIF file to write")
-    r.add_argument("--frames", type=int, default=300)
-    r.add_argument("--fps", type=int, default=30)
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--frames", type=count(1), default=300)
+    r.add_argument("--fps", type=count(1), default=30)
+    r.add_argument("--seed", type=count(0), default=0)
     r.set_defaults(func=cmd_render)
 
     from rlcore.experiments import RESULTS_DIR, WORK_DIR
@@ -183,9 +146,9 @@ def build_parser() -> argparse.ArgumentParser:
     x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
     x.add_argument("action", choices=["list", "run", "status"])
     x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
-    x.add_argument("--jobs", type=int, default=1, help="runs in parallel, one process each (one per core)")
+    x.add_argument("--jobs", type=count(1), default=1, help="runs in parallel, one process each (one per core)")
     x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
-    x.add_argument("--seeds", help="comma-separated subset of the seeds, e.g. 0,1")
+    x.add_argument("--seeds", type=seed_list, help="comma-separated subset of the seeds, e.g. 0,1")
     x.add_argument("--results", default=str(RESULTS_DIR), help="where finished runs' small outputs go")
     x.add_argument("--work", default=str(WORK_DIR), help="where runs train and keep full checkpoints")
     x.set_defaults(func=cmd_experiments)

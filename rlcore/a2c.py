@@ -30,6 +30,7 @@ from tqdm import tqdm
 
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
+from rlcore.config import check_config
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
@@ -97,7 +98,7 @@ class Config:
     """Keyword arguments for ``gymnasium.make``."""
 
     def __post_init__(self) -> None:
-        self.hidden = tuple(int(h) for h in self.hidden)
+        check_config(self)
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
         if self.optimizer not in OPTIMIZERS:
@@ -315,7 +316,8 @@ def train(
         var = obs_norm.obs_rms.var.copy() if obs_norm else None
         return PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
 
-    run, ckpt = open_run(out, "a2c", env_id, seed, steps, config)
+    run, ckpt = open_run(out, "a2c", env_id, seed, steps, config,
+                         schedules="learning-rate annealing" if config.anneal_lr else None)
     if ckpt is not None:
         agent.load_state_dict(ckpt["agent"])
         optimizer.load_state_dict(ckpt["optimizer"])

@@ -51,7 +51,6 @@ bit-identical to an uninterrupted one. The number of workers may change between 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shlex
 import sys
@@ -273,7 +272,8 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
                 raise ValueError(f"{out} holds a single-process PPO run; resume it with `python -m rlcore train ppo`, "
                                  "or choose another --out folder.")
             meta = {"distributed": distributed, **({"command": command} if command else {})}
-            run, ckpt = open_run(out, ALGO, env_id, seed, steps, config, **meta)
+            run, ckpt = open_run(out, ALGO, env_id, seed, steps, config,
+                                 schedules="learning-rate annealing" if config.anneal_lr else None, **meta)
         except (ValueError, CheckpointError) as exc:
             error = str(exc)
     ckpt, error = _broadcast((ckpt, error))
@@ -426,16 +426,18 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="torchrun --nproc_per_node N -m rlcore.dppo",
+    from rlcore.cli import Parser, count, json_object
+
+    p = Parser(prog="torchrun --nproc_per_node N -m rlcore.dppo",
                                 description="Synchronous data-parallel PPO: run one process per worker with torchrun.")
     p.add_argument("--env", required=True, help="Gymnasium environment id, e.g. HalfCheetah-v5")
-    p.add_argument("--steps", type=int, required=True, help="environment steps to train for, over all workers")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--steps", type=count(1), required=True, help="environment steps to train for, over all workers")
+    p.add_argument("--seed", type=count(0), default=0)
     p.add_argument("--out", required=True, help="run folder, written by rank 0 (config, progress.csv, checkpoint.pt)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a Config field (repeatable), e.g. --set n_steps=1024 --set checkpoint_updates=5")
-    p.add_argument("--env-kwargs", help="JSON keyword arguments for gymnasium.make")
-    p.add_argument("--threads", type=int, default=1, help="torch threads per worker (default 1)")
+    p.add_argument("--env-kwargs", type=json_object, help="JSON keyword arguments for gymnasium.make")
+    p.add_argument("--threads", type=count(1), default=1, help="torch threads per worker (default 1)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on rank 0")
     p.add_argument("--dump-params", metavar="DIR", help="(testing) every rank writes its final state to DIR/rank{r}.pt")
     return p
@@ -452,7 +454,7 @@ def launch_command(argv: list[str] | None = None) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rlcore.__main__ import EXIT_USAGE, _overrides
+    from rlcore.cli import EXIT_USAGE, overrides as overrides_of
     from rlcore.envs import UnknownEnvironmentError, check_env_id
 
     args = build_parser().parse_args(argv)
@@ -462,9 +464,9 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
     try:
         check_env_id(args.env)
-        overrides = _overrides(Config, args.set or [])
-        if args.env_kwargs:
-            overrides["env_kwargs"] = json.loads(args.env_kwargs)
+        overrides = overrides_of(Config, args.set or [])
+        if args.env_kwargs is not None:
+            overrides["env_kwargs"] = args.env_kwargs
         train(args.env, make_config(**overrides), steps=args.steps, seed=args.seed, out=args.out,
               progress=not args.no_progress, dump_params=args.dump_params, command=launch_command(argv))
     except (UnknownEnvironmentError, CheckpointError, ValueError) as exc:

@@ -31,6 +31,7 @@ from tqdm import tqdm
 
 from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
 from rlcore.checkpoint import save_checkpoint
+from rlcore.config import NON_NEGATIVE, check_config
 from rlcore.envs import make_env
 from rlcore.evaluate import discounted_return, episode_rewards
 from rlcore.logger import CSVLogger
@@ -101,8 +102,10 @@ class Config:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments for ``gymnasium.make``."""
 
+    RANGES = {"max_grad_norm": NON_NEGATIVE}  # 0: no clipping
+
     def __post_init__(self) -> None:
-        self.hidden = tuple(int(h) for h in self.hidden)
+        check_config(self)
         if not 0 < self.tau <= 1:
             raise ValueError(f"tau must be in (0, 1], got {self.tau}")
         if self.batch_size < 1 or self.buffer_size < self.batch_size:
@@ -275,7 +278,8 @@ def train(
     end_steps: list[int] = []
     evals: list[dict[str, float]] = []
 
-    run, ckpt = open_run(out, "dqn", env_id, seed, steps, config, variant=config.variant)
+    run, ckpt = open_run(out, "dqn", env_id, seed, steps, config, variant=config.variant,
+                         schedules="epsilon schedule" + (" and PER's beta" if config.prioritized else ""))
     if ckpt is not None:
         q.load_state_dict(ckpt["q"])
         q_target.load_state_dict(ckpt["q_target"])

@@ -34,6 +34,7 @@ from tqdm import tqdm
 
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_checkpoint, load_running_stats, running_stats_state, save_checkpoint
+from rlcore.config import check_config
 from rlcore.envs import make_env, make_vec_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
@@ -117,7 +118,7 @@ class Config:
     """Keyword arguments for ``gymnasium.make``."""
 
     def __post_init__(self) -> None:
-        self.hidden = tuple(int(h) for h in self.hidden)
+        check_config(self)
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
         if self.objective not in OBJECTIVES:
@@ -450,7 +451,8 @@ def train(
     if prior is not None and prior.exists() and load_checkpoint(prior).get("distributed"):
         raise ValueError(f"{out} holds a data-parallel PPO run; resume it with `torchrun --nproc_per_node N -m "
                          "rlcore.dppo ...` (see rlcore.dppo), or choose another --out folder.")
-    run, ckpt = open_run(out, "ppo", env_id, seed, steps, config)
+    run, ckpt = open_run(out, "ppo", env_id, seed, steps, config,
+                         schedules="learning-rate annealing" if config.anneal_lr else None)
     if ckpt is not None:
         agent.load_state_dict(ckpt["agent"])
         optimizer.load_state_dict(ckpt["optimizer"])

@@ -169,14 +169,21 @@ def run_metadata(**extra: Any) -> dict[str, Any]:
 
 
 def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, steps: int, config: Any,
-             **meta: Any) -> tuple[RunDir | None, dict[str, Any] | None]:
+             schedules: str | None = None, **meta: Any) -> tuple[RunDir | None, dict[str, Any] | None]:
     """Open a run's output folder: ``(run folder, checkpoint to resume from or None)``.
 
     No ``out``: ``(None, None)``. A folder with a checkpoint of the same algorithm, environment and seed
     is resumed: its CSV logs lose the rows past the checkpoint's step and ``meta.json`` records the resume
     (step, time, machine, versions, commit) under ``resumes``. One of another run is an error. A new folder
     gets ``config.json`` and ``meta.json`` (``meta`` adds fields to the latter).
+
+    ``schedules`` names what the step budget shapes in this run (``"epsilon's decay"``), if anything. Such a
+    run resumes only with the budget it started with: another ``steps`` would bend the schedule mid-run. A run
+    whose budget shapes nothing (DDPG, tabular) may be resumed with a larger budget, which extends it.
     """
+    from rlcore.config import check_budget
+
+    check_budget(steps, seed)
     if out is None:
         return None, None
     from rlcore.checkpoint import load_checkpoint
@@ -188,6 +195,12 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
             raise ValueError(
                 f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} (seed {ckpt.get('seed')}); "
                 "choose another --out folder or delete it."
+            )
+        started = ckpt.get("total_steps")
+        if schedules and started is not None and int(started) != steps:
+            raise ValueError(
+                f"{run.root} was started with --steps {started}, which sets its {schedules}; resume it with "
+                f"--steps {started}, or train {steps} steps in a new --out folder."
             )
         changed = changed_settings(ckpt.get("config", {}), config_dict(config))
         if changed:

@@ -21,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rlcore.checkpoint import save_checkpoint
+from rlcore.config import check_config
 from rlcore.envs import make_env
 from rlcore.logger import CSVLogger
 from rlcore.runs import config_dict, episode_seed, open_run
@@ -52,6 +53,7 @@ class Config:
     """Keyword arguments for ``gymnasium.make``, e.g. ``{"is_slippery": False}`` for FrozenLake."""
 
     def __post_init__(self) -> None:
+        check_config(self)
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
         if not 0 < self.alpha <= 1:

@@ -61,7 +61,7 @@ def test_set_overrides_config_fields(tmp_path):
 
 def test_set_takes_a_network_shape_as_one_number_or_several():
     from rlcore import ddpg
-    from rlcore.__main__ import _overrides
+    from rlcore.cli import overrides as _overrides
 
     for text, hidden in (("16", (16,)), ("64,64", (64, 64)), ("[32, 8]", (32, 8))):
         assert ddpg.Config(**_overrides(ddpg.Config, [f"hidden={text}"])).hidden == hidden

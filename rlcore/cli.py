@@ -1,0 +1,92 @@
+"""What every command line of rlcore shares (``python -m rlcore`` and ``python -m rlcore.dppo``): argument types
+that refuse a bad value in one line, ``--set key=value`` parsing, and the exit statuses.
+
+No library module imports :mod:`rlcore.__main__`; both command lines import this.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import typing
+from typing import Any
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+def count(low: int):
+    """An argparse type: an integer >= ``low``, refused in one line otherwise."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {value}")
+        return value
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+def seed_list(text: str) -> list[int]:
+    """``--seeds 0,1,2``: comma-separated integers >= 0."""
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers >= 0 such as 0,1, got {text!r}") from None
+    if not seeds or min(seeds) < 0:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers >= 0 such as 0,1, got {text!r}")
+    return seeds
+
+
+def json_object(text: str) -> dict[str, Any]:
+    """``--env-kwargs '{"is_slippery": false}'``: a JSON object."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        value = None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object such as '{{\"is_slippery\": false}}', got {text!r}")
+    return value
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but a bad value is one line (``error: ...``) and exit status 2, without the usage block."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        self.exit(EXIT_USAGE, f"error: {message} (see `{self.prog} --help`)\n")
+
+
+def parse_value(text: str, annotation: Any) -> Any:
+    """Parse a ``--set key=value`` value as JSON where possible (numbers, true/false, dicts).
+
+    A tuple field (``hidden``) also takes one number or comma-separated ones: ``hidden=64`` or ``hidden=64,64``.
+    """
+    if typing.get_origin(annotation) is tuple and "," in text and not text.lstrip().startswith("["):
+        text = f"[{text}]"
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        value = text
+    if annotation in (float, "float") and isinstance(value, int):
+        value = float(value)
+    if typing.get_origin(annotation) is tuple and not isinstance(value, (list, tuple)):
+        value = [value]
+    return value
+
+
+def overrides(config_cls: type, pairs: list[str]) -> dict[str, Any]:
+    hints = typing.get_type_hints(config_cls)
+    fields = {f.name for f in dataclasses.fields(config_cls)}
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        if "=" not in pair:
+            raise ValueError(f"--set expects key=value, got {pair!r}")
+        key, text = pair.split("=", 1)
+        key = key.strip().replace("-", "_")
+        if key not in fields:
+            raise ValueError(f"{config_cls.__module__}.Config has no field {key!r}; fields: {', '.join(sorted(fields))}")
+        out[key] = parse_value(text, hints.get(key))
+    return out
