@@ -44,14 +44,22 @@ def dueling_aggregate(value: torch.Tensor, advantages: torch.Tensor) -> torch.Te
 
 
 class DuelingQNetwork(nn.Module):
-    """Q(s, ·) from a shared body and two streams: a state value V(s) and advantages A(s, ·)."""
+    """Q(s, ·) from a shared body and two streams: a state value V(s) and advantages A(s, ·).
+
+    As in Wang et al. (2016), the two streams *replace* the plain network's last hidden layer: the body is
+    ``hidden[:-1]`` and each stream is one hidden layer of ``hidden[-1]`` units, so the network is as deep as
+    :class:`QNetwork` with the same ``hidden``. It still holds more weights (two last layers instead of one).
+    """
 
     def __init__(self, obs_dim: int, n_actions: int, hidden: Sequence[int] = (64, 64)):
         super().__init__()
-        *body, last = [obs_dim, *hidden]
-        self.body = mlp([*body, last], output_activation=nn.ReLU) if body else nn.Identity()
-        self.value = mlp([last, last, 1])
-        self.advantage = mlp([last, last, n_actions])
+        if len(hidden) < 1:
+            raise ValueError("a dueling network needs at least one hidden layer (each stream is the last one)")
+        *shared, last = hidden
+        width = shared[-1] if shared else obs_dim
+        self.body = mlp([obs_dim, *shared], output_activation=nn.ReLU) if shared else nn.Identity()
+        self.value = mlp([width, last, 1])
+        self.advantage = mlp([width, last, n_actions])
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         h = self.body(obs)
