@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from rlcore import render
-from rlcore.render import HeadlessGLError, frames_to_gif, render_gif, rollout_frames, select_gl_backend
+from rlcore.render import (HeadlessGLError, env_dt, frames_to_gif, render_gif, rollout_frames, select_gl_backend,
+                           simulated_seconds)
 
 
 def test_no_working_backend_names_what_to_install(monkeypatch):
@@ -43,6 +44,33 @@ def test_frames_to_gif_round_trips():
     assert decoded.shape[0] == 3 and decoded.shape[1:3] == (12, 16)
     with pytest.raises(ValueError):
         frames_to_gif([])
+
+
+def test_frames_to_gif_palette_size_and_frame_duration():
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, size=(16, 16, 3), dtype=np.uint8) for _ in range(3)]
+    small, full = frames_to_gif(frames, fps=25, colors=8), frames_to_gif(frames, fps=25)
+    assert len(small) < len(full)
+    gif = Image.open(io.BytesIO(small))
+    assert gif.info["duration"] == 40  # 25 frames per second
+    colours = set()
+    for i in range(gif.n_frames):
+        gif.seek(i)
+        colours |= {tuple(c) for c in np.asarray(gif.convert("RGB")).reshape(-1, 3)}
+    assert len(colours) <= 8
+    for bad in (1, 257):
+        with pytest.raises(ValueError):
+            frames_to_gif(frames, colors=bad)
+
+
+def test_simulated_seconds_of_a_gif():
+    assert env_dt("Hopper-v5") == pytest.approx(0.008)  # frame_skip 4 x timestep 0.002
+    assert simulated_seconds("Hopper-v5", frames=150, frame_skip=5) == pytest.approx(6.0)
+    assert simulated_seconds("HalfCheetah-v5", frames=120) == pytest.approx(6.0)
+    with pytest.raises(ValueError):
+        env_dt("FrozenLake-v1")
 
 
 def test_toy_text_rollout_follows_the_policy():
