@@ -30,7 +30,7 @@ from tqdm import tqdm
 
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
-from rlcore.config import check_config
+from rlcore.config import check_budget, check_config
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
@@ -291,6 +291,7 @@ def train(
     progress: bool = False,
 ) -> Result:
     """Train A2C for (at least) ``steps`` environment steps, in whole iterations of num_envs * n_steps."""
+    check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
     envs = make_envs(env_id, config, seed)

@@ -27,7 +27,7 @@ from tqdm import tqdm
 
 from rlcore.buffers import ReplayBuffer
 from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
-from rlcore.config import check_config
+from rlcore.config import check_budget, check_config
 from rlcore.dqn import soft_update
 from rlcore.envs import make_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
@@ -205,6 +205,7 @@ class Result:
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
           out: str | Path | None = None, progress: bool = False) -> Result:
     """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint)."""
+    check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)

@@ -69,6 +69,7 @@ from tqdm import tqdm
 from rlcore import ppo
 from rlcore.checkpoint import (CheckpointError, load_checkpoint, load_running_stats, running_stats_state,
                                save_checkpoint)
+from rlcore.config import check_budget
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
@@ -230,6 +231,7 @@ def train(
     there (to check that the workers agree). ``command``: how the job was launched, for ``meta.json``
     (default: this process's command line). Returns this worker's :class:`rlcore.ppo.Result`.
     """
+    check_budget(steps, seed)
     config = config or Config()
     if not isinstance(config, Config):
         config = Config(**config_dict(config))

@@ -31,7 +31,7 @@ from tqdm import tqdm
 
 from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
 from rlcore.checkpoint import save_checkpoint
-from rlcore.config import NON_NEGATIVE, check_config
+from rlcore.config import NON_NEGATIVE, check_budget, check_config
 from rlcore.envs import make_env
 from rlcore.evaluate import discounted_return, episode_rewards
 from rlcore.logger import CSVLogger
@@ -260,6 +260,7 @@ def train(
     progress: bool = False,
 ) -> Result:
     """Train a DQN variant for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint)."""
+    check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
     env = make_env(env_id, seed=seed, **config.env_kwargs)

@@ -411,8 +411,10 @@ def run_in_pool(fn: Callable[..., Any], calls: list[tuple], jobs: int):
         try:
             while running:
                 done, running = wait(running, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    result = fut.result()  # raises: nothing new is submitted, the with-block waits for the rest
+                # every call that finished is looked at before any new one starts: a failure among them raises
+                # here, nothing new is submitted, and the with-block waits for the calls still running
+                results = [fut.result() for fut in done]
+                for result in results:
                     if todo:
                         running.add(pool.submit(fn, *todo.pop(0)))
                     yield result

@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_checkpoint, load_running_stats, running_stats_state, save_checkpoint
-from rlcore.config import check_config
+from rlcore.config import check_budget, check_config
 from rlcore.envs import make_env, make_vec_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
@@ -160,7 +160,9 @@ def adaptive_kl_coef(beta: float, kl: float, kl_target: float, beta_low: float, 
 
 
 def normalize(x: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
-    """(x - mean) / std."""
+    """(x - mean) / std; a single element, whose spread is undefined, is left as it is (as in A2C and SB3)."""
+    if x.numel() < 2:
+        return x
     return (x - x.mean()) / (x.std() + eps)
 
 
@@ -420,6 +422,7 @@ def train(
     progress: bool = False,
 ) -> Result:
     """Train PPO for (at least) ``steps`` environment steps, in whole iterations."""
+    check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)

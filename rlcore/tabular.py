@@ -21,7 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rlcore.checkpoint import save_checkpoint
-from rlcore.config import check_config
+from rlcore.config import check_budget, check_config
 from rlcore.envs import make_env
 from rlcore.logger import CSVLogger
 from rlcore.runs import config_dict, episode_seed, open_run
@@ -217,6 +217,7 @@ def train(
     metadata, a per-episode ``progress.csv`` and ``checkpoint.pt`` there; if ``out`` already holds an
     unfinished checkpoint of the same run, training resumes from it. Ctrl-C saves a checkpoint first.
     """
+    check_budget(steps, seed)
     config = config or Config()
     env = make_env(env_id, seed=seed, **config.env_kwargs)
     n_states, n_actions = check_spaces(env, env_id)

@@ -25,3 +25,25 @@ def scaling_record():
          "env_steps_per_second_wall": 120.0, "rollout_seconds_per_update": 0.3, "update_seconds_per_update": 0.52,
          "curve": {"step": [], "episode_return": []}},
     ]}
+
+
+@pytest.fixture
+def interrupt_at_first_checkpoint(monkeypatch):
+    """``interrupt_at_first_checkpoint(module)``: the next ``module.train`` stops right after its first periodic
+    checkpoint with a KeyboardInterrupt, as Ctrl-C would there, so that a test can resume it with the same budget
+    (a run whose budget shapes its schedules cannot be resumed with another one)."""
+
+    def arm(module):
+        real = module.save_checkpoint
+        calls = []
+
+        def save_then_interrupt(path, state):
+            real(path, state)
+            calls.append(int(state["step"]))
+            if len(calls) == 1:
+                raise KeyboardInterrupt
+
+        monkeypatch.setattr(module, "save_checkpoint", save_then_interrupt)
+        return calls
+
+    return arm

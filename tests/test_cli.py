@@ -115,10 +115,13 @@ def test_interrupt_leaves_a_usable_checkpoint_and_resumes(tmp_path, sig):
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     try:
-        deadline = time.time() + 60
-        while time.time() < deadline and not (out / "progress.csv").exists():
-            time.sleep(0.2)
-        time.sleep(1.0)  # train a little
+        deadline = time.monotonic() + 120
+        progress = out / "progress.csv"
+        # wait for the event "it has trained a little": two episodes logged (polled, not a fixed sleep)
+        while time.monotonic() < deadline and proc.poll() is None and \
+                not (progress.exists() and len(progress.read_text().splitlines()) >= 3):
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()[1]
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
     finally:
@@ -166,3 +169,59 @@ def test_ddpg_through_the_command_line(tmp_path):
     assert result["algo"] == "ddpg" and result["train_steps"] == 400
     proc = rlcore("train", "ddpg", "--env", "CartPole-v1", "--steps", 10, "--out", tmp_path / "c", check=False)
     assert proc.returncode == 2 and "continuous" in proc.stderr and "Traceback" not in proc.stderr
+
+
+BAD_INPUT = [
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "-5"], "--steps: expected an integer >= 1, got -5"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "ten"], "--steps: expected an integer >= 1, got 'ten'"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--seed", "-1"], "--seed: expected an integer >= 0"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--set", "actor_lr=-1"], "actor_lr must be > 0"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--set", "actor_lr=fast"], "actor_lr must be a number"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--set", "batch_size=0"], "batch_size must be >= 1"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--set", "batch_size=2.5"], "must be an integer"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--set", "tau=0"], "tau must be in (0, 1]"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--set", "hidden=0"], "layer size must be >= 1"),
+    (["train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--set", "normalize_obs=maybe"], "true or false"),
+    (["train", "dqn", "--env", "CartPole-v1", "--steps", "10", "--set", "gamma=1.5"], "gamma must be in [0, 1]"),
+    (["train", "ppo", "--env", "CartPole-v1", "--steps", "10", "--set", "n_epochs=0"], "n_epochs must be >= 1"),
+    (["train", "ppo", "--env", "CartPole-v1", "--steps", "10", "--set", "learning_rate=nan"], "learning_rate must be"),
+    (["train", "a2c", "--env", "CartPole-v1", "--steps", "10", "--set", "num_envs=-2"], "num_envs must be >= 1"),
+    (["train", "q-learning", "--env", "FrozenLake-v1", "--steps", "10", "--set", "alpha=0"], "alpha must be in (0, 1]"),
+    (["train", "q-learning", "--env", "FrozenLake-v1", "--steps", "10", "--env-kwargs", "slippery"], "a JSON object"),
+    (["evaluate", "runs/none", "--episodes", "0"], "--episodes: expected an integer >= 1, got 0"),
+    (["render", "runs/none", "--out", "x.gif", "--frames", "0"], "--frames: expected an integer >= 1"),
+    (["render", "runs/none", "--out", "x.gif", "--fps", "-3"], "--fps: expected an integer >= 1"),
+    (["experiments", "run", "dqn-cartpole", "--jobs", "0"], "--jobs: expected an integer >= 1"),
+    (["experiments", "run", "dqn-cartpole", "--seeds", "one"], "--seeds: expected comma-separated integers"),
+    (["experiments", "run", "dqn-cartpole", "--only", "nope"], "dqn-cartpole has no run 'nope'"),
+    (["experiments", "run", "dqn-cartpole", "--seeds", "99"], "dqn-cartpole has no seed [99]"),
+]
+
+
+@pytest.mark.parametrize("args, message", BAD_INPUT, ids=[" ".join(a[:2] + a[-2:]) for a, _ in BAD_INPUT])
+def test_every_bad_value_is_one_line_before_any_work(args, message, tmp_path, capsys, monkeypatch):
+    from rlcore.__main__ import main
+
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "run"
+    argv = [*args, "--out", str(out)] if args[0] == "train" else args
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's refusal
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert message in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    assert not out.exists() and not (tmp_path / "runs").exists()  # refused before any work
+
+
+def test_dppo_refuses_bad_values_the_same_way(tmp_path, capsys):
+    from rlcore.dppo import main
+
+    try:
+        code = main(["--env", "Pendulum-v1", "--steps", "0", "--out", str(tmp_path / "d")])
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and "--steps: expected an integer >= 1, got 0" in err and len(err.strip().splitlines()) == 1

@@ -127,9 +127,9 @@ def test_one_worker_is_ppo_bit_for_bit(tmp_path):
 
 def test_resume_with_a_larger_budget_starts_from_the_checkpoint_step(tmp_path):
     torch.set_num_threads(1)
-    dppo.train("Pendulum-v1", dppo.Config(**SMALL), steps=512, seed=0, out=tmp_path)
+    dppo.train("Pendulum-v1", dppo.Config(**SMALL, anneal_lr=False), steps=512, seed=0, out=tmp_path)
     first = load_checkpoint(tmp_path / "checkpoint.pt")
-    result = dppo.train("Pendulum-v1", dppo.Config(**SMALL), steps=1_536, seed=0, out=tmp_path)
+    result = dppo.train("Pendulum-v1", dppo.Config(**SMALL, anneal_lr=False), steps=1_536, seed=0, out=tmp_path)
     second = load_checkpoint(tmp_path / "checkpoint.pt")
     assert (first["step"], first["iteration"], second["step"], second["iteration"]) == (512, 1, 1_536, 3)
     assert result.steps == 1_536 and second["obs_count"] > first["obs_count"]

@@ -144,9 +144,14 @@ def test_short_run_on_cartpole_beats_random(variant):
     assert returns.mean() > 100, returns
 
 
-def test_resume_keeps_replay_memory_and_network(tmp_path):
+def test_resume_keeps_replay_memory_and_network(tmp_path, interrupt_at_first_checkpoint, monkeypatch):
     torch.set_num_threads(1)
-    train("CartPole-v1", _small(), steps=800, seed=1, out=tmp_path)
+    import rlcore.dqn
+
+    interrupt_at_first_checkpoint(rlcore.dqn)
+    with pytest.raises(KeyboardInterrupt):
+        train("CartPole-v1", _small(checkpoint_every=800), steps=1_500, seed=1, out=tmp_path)
+    monkeypatch.undo()
     ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
     assert ckpt["step"] == 800 and "replay" in ckpt
     resumed = train("CartPole-v1", _small(), steps=1_500, seed=1, out=tmp_path)
@@ -175,11 +180,89 @@ def test_update_fits_a_batch_of_different_targets():
 
 
 @pytest.mark.parametrize("variant", [{}, {"double": True, "dueling": True, "prioritized": True}])
-def test_a_run_stopped_at_an_episode_end_and_resumed_is_the_uninterrupted_run(tmp_path, variant):
+def test_a_run_stopped_at_an_episode_end_and_resumed_is_the_uninterrupted_run(tmp_path, variant,
+                                                                              interrupt_at_first_checkpoint,
+                                                                              monkeypatch):
     torch.set_num_threads(1)
     whole = train("CartPole-v1", _small(**variant), steps=1_500, seed=2, out=tmp_path / "whole")
     stop = int(next(e for e in whole.episode_end_steps if e > 800))  # an episode ends there: nothing in flight
-    train("CartPole-v1", _small(**variant), steps=stop, seed=2, out=tmp_path / "parts")
+    import rlcore.dqn
+
+    interrupt_at_first_checkpoint(rlcore.dqn)  # Ctrl-C right after the checkpoint at `stop`
+    with pytest.raises(KeyboardInterrupt):
+        train("CartPole-v1", _small(**variant, checkpoint_every=stop), steps=1_500, seed=2, out=tmp_path / "parts")
+    monkeypatch.undo()
+    assert load_checkpoint(tmp_path / "parts" / "checkpoint.pt")["step"] == stop
     resumed = train("CartPole-v1", _small(**variant), steps=1_500, seed=2, out=tmp_path / "parts")
     for pa, pb in zip(whole.q.parameters(), resumed.q.parameters()):
         torch.testing.assert_close(pa, pb, rtol=0, atol=0)
+
+
+class TableQ(torch.nn.Module):
+    """Q(s, .) = row s of a table, for one-hot observations (a Linear layer without bias)."""
+
+    def __init__(self, table):
+        super().__init__()
+        self.lin = torch.nn.Linear(len(table), len(table[0]), bias=False)
+        with torch.no_grad():
+            self.lin.weight.copy_(torch.tensor(table, dtype=torch.float32).T)
+
+    def forward(self, obs):
+        return self.lin(obs)
+
+
+def _one_hot_batch(weights=(1.0, 1.0)):
+    s, s2 = np.eye(2, dtype=np.float32)[[0, 0]], np.eye(2, dtype=np.float32)[[1, 1]]
+    return Batch(s, np.array([0, 1]), np.array([1.0, 2.0], dtype=np.float32), s2, np.zeros(2, dtype=np.float32),
+                 np.arange(2), np.array(weights, dtype=np.float32))
+
+
+def test_update_uses_the_double_dqn_target_when_double():
+    # in s' = state 1 the online network prefers action 0 (worth 1 to the target network),
+    # the target network's own max is action 1 (worth 10)
+    online, target = TableQ([[0.0, 0.0], [5.0, 0.0]]), TableQ([[0.0, 0.0], [1.0, 10.0]])
+    frozen = torch.optim.SGD(online.parameters(), lr=0.0)
+    for double, next_value in ((True, 1.0), (False, 10.0)):
+        cfg = Config(double=double, huber=False, max_grad_norm=0, gamma=0.5)
+        _, td = update(online, target, frozen, _one_hot_batch(), cfg)
+        # Q(s, a) = 0 for both transitions, so the TD error is the target y = r + gamma * next value
+        np.testing.assert_allclose(td, [1.0 + 0.5 * next_value, 2.0 + 0.5 * next_value])
+
+
+def test_importance_weights_reach_the_loss_only_with_prioritized_replay():
+    online, target = TableQ([[0.0, 0.0], [0.0, 0.0]]), TableQ([[0.0, 0.0], [0.0, 0.0]])
+    frozen = torch.optim.SGD(online.parameters(), lr=0.0)
+    batch = _one_hot_batch(weights=(1.0, 0.0))  # the second transition's weight is 0
+    per = Config(prioritized=True, huber=False, max_grad_norm=0)
+    loss, _ = update(online, target, frozen, batch, per)
+    assert loss == pytest.approx((1.0 ** 2 * 1.0 + 2.0 ** 2 * 0.0) / 2)
+    plain, _ = update(online, target, frozen, batch, Config(huber=False, max_grad_norm=0))
+    assert plain == pytest.approx((1.0 + 4.0) / 2)
+
+
+def test_prioritized_training_changes_the_priorities_it_samples(tmp_path):
+    cfg = _small(prioritized=True, learning_starts=100, checkpoint_every=10**9)
+    train("CartPole-v1", cfg, steps=300, seed=0, out=tmp_path)
+    replay = load_checkpoint(tmp_path / "checkpoint.pt")["replay"]
+    priorities = np.asarray(replay["priorities"])
+    assert len(priorities) == 300
+    # new transitions enter at the running maximum; the ones a gradient step sampled get |TD error|^alpha instead
+    assert len(np.unique(np.round(priorities, 6))) > 10
+    assert priorities.min() < 0.5 * priorities.max()
+
+
+def test_dueling_streams_replace_the_last_hidden_layer():
+    """Wang et al.: the two streams replace the plain network's last hidden layer, so both are equally deep."""
+    def linear_depth(module):
+        return sum(isinstance(m, torch.nn.Linear) for m in module.modules())
+
+    plain, dueling = QNetwork(4, 2, (256, 256)), DuelingQNetwork(4, 2, (256, 256))
+    assert linear_depth(plain) == 3
+    assert linear_depth(dueling.body) == 1 and linear_depth(dueling.value) == linear_depth(dueling.advantage) == 2
+    n = lambda net: sum(p.numel() for p in net.parameters())  # noqa: E731
+    assert n(plain) == (4 * 256 + 256) + (256 * 256 + 256) + (256 * 2 + 2)
+    assert n(dueling) == (4 * 256 + 256) + (256 * 256 + 256) + (256 + 1) + (256 * 256 + 256) + (256 * 2 + 2)
+    one = DuelingQNetwork(4, 3, (32,))  # one hidden layer: no shared body, each stream is that layer
+    assert isinstance(one.body, torch.nn.Identity) and one(torch.zeros(2, 4)).shape == (2, 3)
+    with pytest.raises(ValueError, match="at least one hidden layer"):
+        DuelingQNetwork(4, 3, ())

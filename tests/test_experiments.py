@@ -29,10 +29,16 @@ def tiny(monkeypatch):
 
 
 def _mark_or_fail(folder, i):
-    """A stand-in for one seed's training, in a pool worker: call 0 fails at once, the others leave a mark."""
+    """A stand-in for one seed's training, in a pool worker: call 0 fails at once; call 1 finishes only once call 0
+    has failed (it waits for that event, not for a fixed time); the others just leave a mark."""
+    gate = Path(folder) / "failing-0"
     if i == 0:
+        gate.touch()
         raise RuntimeError("seed 0 failed")
-    time.sleep(1.0)
+    if i == 1:
+        deadline = time.monotonic() + 60
+        while not gate.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
     (Path(folder) / f"ran-{i}").touch()
     return i
 
@@ -42,7 +48,7 @@ def test_pool_starts_nothing_new_after_a_failure(tmp_path):
     # while call 1, already running, is waited for
     with pytest.raises(RuntimeError, match="seed 0 failed"):
         list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in range(4)], jobs=2))
-    assert sorted(f.name for f in tmp_path.iterdir()) == ["ran-1"]
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["failing-0", "ran-1"]
     assert list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in (3, 2)], jobs=2)) in ([3, 2], [2, 3])
 
 

@@ -111,9 +111,9 @@ def test_resume_restores_iteration_and_observation_statistics(tmp_path):
     torch.set_num_threads(1)
     from rlcore.checkpoint import load_checkpoint
 
-    train("Pendulum-v1", Config(**SMALL), steps=512, seed=0, out=tmp_path)
+    train("Pendulum-v1", Config(**SMALL, anneal_lr=False), steps=512, seed=0, out=tmp_path)
     first = load_checkpoint(tmp_path / "checkpoint.pt")
-    resumed = train("Pendulum-v1", Config(**SMALL), steps=1_024, seed=0, out=tmp_path)
+    resumed = train("Pendulum-v1", Config(**SMALL, anneal_lr=False), steps=1_024, seed=0, out=tmp_path)
     second = load_checkpoint(tmp_path / "checkpoint.pt")
     assert (first["iteration"], second["iteration"], resumed.steps) == (1, 2, 1_024)
     assert second["obs_count"] > first["obs_count"]  # statistics continued, not restarted
@@ -126,12 +126,12 @@ def test_resume_drops_log_rows_written_after_the_checkpoint_and_records_itself(t
     from rlcore.logger import read_csv
 
     torch.set_num_threads(1)
-    train("Pendulum-v1", Config(**SMALL), steps=512, seed=0, out=tmp_path)
+    train("Pendulum-v1", Config(**SMALL, anneal_lr=False), steps=512, seed=0, out=tmp_path)
     with (tmp_path / "progress.csv").open() as f:
         header = f.readline().strip().split(",")
     with (tmp_path / "progress.csv").open("a") as f:  # a row from after the checkpoint, then the crash
         f.write(",".join("777" if h == "step" else "-12345" for h in header) + "\n")
-    train("Pendulum-v1", Config(**SMALL), steps=1_024, seed=0, out=tmp_path)
+    train("Pendulum-v1", Config(**SMALL, anneal_lr=False), steps=1_024, seed=0, out=tmp_path)
     steps = read_csv(tmp_path / "progress.csv")["step"]
     assert 777 not in steps.tolist() and -12345 not in read_csv(tmp_path / "progress.csv")["episode_return"].tolist()
     assert np.all(np.diff(steps) >= 0)  # (parallel environments can finish episodes at the same step)
@@ -182,3 +182,48 @@ def test_the_deterministic_policy_clips_to_the_environments_own_action_bounds(tm
     assert evaluated_unclipped(load_checkpoint(tmp_path / "old.pt"))
     policy = load_policy(load_checkpoint(tmp_path / "old.pt"))
     assert policy.low.tolist() == gym.make("Pendulum-v1").action_space.low.tolist() == [-2.0]
+
+
+def test_normalize_by_hand_and_a_single_element_is_not_nan():
+    from rlcore.ppo import normalize
+
+    x = torch.tensor([1.0, 2.0, 3.0])
+    torch.testing.assert_close(normalize(x), (x - 2.0) / (1.0 + 1e-8))
+    one = normalize(torch.tensor([5.0]))
+    assert not torch.isnan(one).any() and one.item() == 5.0  # left as it is, as A2C does
+
+
+def test_the_saved_policy_on_raw_observations_acts_as_the_training_wrapper_fed_the_network(tmp_path):
+    """The policy saved with a run scales raw observations itself; it must give the same actions as the network
+    fed through training's own Gymnasium wrappers (NormalizeObservation, then the clip) with the same statistics."""
+    import gymnasium as gym
+
+    from rlcore.checkpoint import load_checkpoint, load_running_stats
+    from rlcore.envs import make_env
+    from rlcore.ppo import _find, load_policy, make_envs
+
+    config = Config(**SMALL)
+    train("Pendulum-v1", config, steps=1_024, seed=0, out=tmp_path)
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
+    policy = load_policy(ckpt)
+
+    envs = make_envs("Pendulum-v1", config, seed=0)  # training's wrapper chain, with the run's final statistics
+    norm = _find(envs, gym.wrappers.vector.NormalizeObservation)
+    clip = _find(envs, gym.wrappers.vector.TransformObservation)
+    load_running_stats(norm.obs_rms, ckpt, "obs")
+    norm.update_running_mean = False
+
+    env = make_env("Pendulum-v1", seed=1)
+    obs, _ = env.reset(seed=1)
+    raw = []
+    for _ in range(64):
+        raw.append(obs)
+        obs, *_ = env.step(env.action_space.sample())
+    raw = np.array(raw, dtype=np.float32) * np.array([1.0, 1.0, 3.0], dtype=np.float32)  # reach the clip too
+    fed = clip.func(norm.observations(raw))
+    assert np.abs(fed).max() > 1.0  # the statistics really scale the observations
+    with torch.no_grad():
+        wanted = policy.agent.deterministic(torch.as_tensor(fed, dtype=torch.float32)).numpy()
+    wanted = np.clip(wanted, -2.0, 2.0)
+    got = np.array([policy(o) for o in raw])
+    np.testing.assert_allclose(got, wanted, rtol=1e-5, atol=1e-5)

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from dataclasses import dataclass
 
+import pytest
+
 from rlcore import runs
 
 
@@ -66,3 +68,40 @@ def test_a_run_does_not_resume_a_checkpoint_of_other_settings(tmp_path):
     # what is only logged or saved may change, and settings a checkpoint predates are not compared
     assert train("Pendulum-v1", Config(**{**small, "eval_every": 50}), steps=200, seed=0, out=tmp_path).steps == 200
     assert runs.changed_settings({"hidden": [16], "tau": 0.005}, {"hidden": (16,), "tau": 0.005, "new": 1}) == []
+
+
+def test_a_budget_that_shapes_schedules_cannot_change_on_resume(tmp_path):
+    """DQN's epsilon is annealed over a fraction of --steps: resuming with more or fewer steps would bend it."""
+    import pytest
+
+    from rlcore.dqn import Config, train
+
+    cfg = Config(learning_starts=50, train_freq=50, gradient_steps=1, batch_size=16, hidden=(8,), eval_every=0)
+    train("CartPole-v1", cfg, steps=200, seed=0, out=tmp_path)
+    for other in (400, 100):  # both directions
+        with pytest.raises(ValueError, match=r"was started with --steps 200, which sets its epsilon schedule"):
+            train("CartPole-v1", cfg, steps=other, seed=0, out=tmp_path)
+    assert train("CartPole-v1", cfg, steps=200, seed=0, out=tmp_path).steps == 200  # the same budget resumes
+
+
+@pytest.mark.parametrize("anneal_lr", [True, False])
+def test_ppo_resumes_with_another_budget_only_without_annealing(tmp_path, anneal_lr):
+    from rlcore.ppo import Config, train
+
+    cfg = Config(num_envs=1, n_steps=64, batch_size=32, n_epochs=1, hidden=(8,), eval_every=0, anneal_lr=anneal_lr)
+    train("CartPole-v1", cfg, steps=64, seed=0, out=tmp_path)
+    if anneal_lr:
+        with pytest.raises(ValueError, match="learning-rate annealing; resume it with --steps 64"):
+            train("CartPole-v1", cfg, steps=128, seed=0, out=tmp_path)
+    else:  # nothing depends on the budget: a larger one extends the run
+        assert train("CartPole-v1", cfg, steps=128, seed=0, out=tmp_path).steps == 128
+
+
+def test_budget_and_seed_are_checked_before_anything_is_written(tmp_path):
+    from rlcore.ddpg import train
+
+    for steps, seed, message in ((-5, 0, "steps must be an integer >= 1"), (0, 0, "steps must be"),
+                                 (10, -1, "seed must be an integer >= 0")):
+        with pytest.raises(ValueError, match=message):
+            train("Pendulum-v1", steps=steps, seed=seed, out=tmp_path / "x")
+    assert not (tmp_path / "x").exists()
