@@ -6,7 +6,9 @@ notebook that fails to execute. This check does not rely on that alone: it fails
 
 - a page listed in _toc.yml has no HTML file in _build/html/, or
 - _build/html/reports/ holds any execution report (myst-nb writes one per notebook that raised;
-  the traceback is inside).
+  the traceback is inside), or
+- a page of _toc.yml shows a GIF larger than 1.5 MB (a page should load light; rlcore.render.render_gif's
+  size, frame_skip and colors options trade length and detail for bytes).
 
 Run from the repository root after the build:  python3 .ci/check_book.py
 Reports from an earlier build are not deleted by a later one: remove _build/html/reports/ before
@@ -15,6 +17,7 @@ building (.ci/run does) or delete _build/ altogether.
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -22,6 +25,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 HTML = ROOT / "_build" / "html"
+MAX_GIF_BYTES = 1_500_000
 
 
 def toc_pages(node: object) -> list[str]:
@@ -55,13 +59,23 @@ def main() -> int:
                 lines = report.read_text(encoding="utf-8", errors="replace").strip().splitlines()
                 tail = "\n      ".join(lines[-15:])
                 problems.append(f"execution failed, report {report.relative_to(ROOT)}:\n      {tail}")
+        for page in toc_pages(toc):
+            html = HTML / Path(page).with_suffix(".html")
+            if not html.is_file():
+                continue
+            for src in dict.fromkeys(re.findall(r'<img[^>]*\ssrc="([^"]+\.gif)"', html.read_text(encoding="utf-8"))):
+                gif = (html.parent / src).resolve()
+                if gif.is_file() and gif.stat().st_size > MAX_GIF_BYTES:
+                    problems.append(f"page {page!r} shows {gif.relative_to(ROOT)}: {gif.stat().st_size / 1e6:.2f} MB, "
+                                    f"over the {MAX_GIF_BYTES / 1e6:.1f} MB a GIF may take")
 
     if problems:
         print("Book check FAILED:", file=sys.stderr)
         for problem in problems:
             print(f"  - {problem}", file=sys.stderr)
         return 1
-    print(f"Book check passed: every page of _toc.yml is in {HTML.relative_to(ROOT)}/, no execution reports.")
+    print(f"Book check passed: every page of _toc.yml is in {HTML.relative_to(ROOT)}/, no execution reports, "
+          f"no GIF over {MAX_GIF_BYTES / 1e6:.1f} MB.")
     return 0
 
 
