@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-from gymnasium.wrappers.utils import RunningMeanStd
 import numpy as np
 import torch
 from torch import nn
@@ -29,7 +28,7 @@ from rlcore.buffers import ReplayBuffer
 from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
 from rlcore.config import check_budget, check_config
 from rlcore.dqn import soft_update
-from rlcore.envs import make_env, normalize_observation
+from rlcore.envs import ObservationScaler, make_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.nets import mlp
@@ -229,12 +228,12 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     else:
         noise = None
     param_noise = AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed) if config.exploration == "param" else None
-    obs_rms = RunningMeanStd(shape=(sp["obs_dim"],)) if config.normalize_obs else None
+    scaler = ObservationScaler(sp["obs_dim"]) if config.normalize_obs else None
+    obs_rms = None if scaler is None else scaler.rms
 
     def scaled(x: np.ndarray) -> torch.Tensor:
         """Observations as the networks see them: raw, or scaled by the running statistics (normalize_obs)."""
-        return torch.as_tensor(x if obs_rms is None else normalize_observation(x, obs_rms.mean, obs_rms.var),
-                               dtype=torch.float32)
+        return torch.as_tensor(x, dtype=torch.float32) if scaler is None else scaler.scale(x)
 
     def policy() -> DeterministicPolicy:
         if obs_rms is None:
@@ -254,8 +253,9 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         if "replay" in ckpt:
             buffer.load_state_dict(ckpt["replay"])
         step, episode = int(ckpt["step"]), int(ckpt["episode"])
-        if obs_rms is not None:
-            load_running_stats(obs_rms, ckpt, "obs")
+        if scaler is not None:
+            load_running_stats(scaler.rms, ckpt, "obs")
+            scaler.loaded()
         rng.bit_generator.state = ckpt["rng"]
         torch.set_rng_state(ckpt["torch_rng"])
         if "noise" in ckpt:  # the noise's generator and state: the run continues as if never stopped
@@ -312,8 +312,8 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                     action = np.clip(action + half * noise(), low, high).astype(np.float32)
             next_obs, reward, terminated, truncated, info = env.step(action)
             buffer.add(obs, action, reward, next_obs, terminated)
-            if obs_rms is not None:
-                obs_rms.update(next_obs[None])
+            if scaler is not None:
+                scaler.update(next_obs)
             obs = next_obs
             step += 1
             ep_len += 1

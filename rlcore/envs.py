@@ -12,6 +12,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch
 
 
 class UnknownEnvironmentError(ValueError):
@@ -119,3 +120,40 @@ def normalize_observation(obs, mean, var, clip: float = 10.0) -> np.ndarray:
     """(obs - mean) / sqrt(var + 1e-8), clipped to +-clip: Gymnasium's NormalizeObservation with given statistics
     (and the clipping of SB3's VecNormalize). Policies apply their training's statistics with it."""
     return np.clip((np.asarray(obs, dtype=np.float64) - mean) / np.sqrt(var + 1e-8), -clip, clip)
+
+
+class ObservationScaler:
+    """Running observation statistics and the scaling :func:`normalize_observation` does, for a training loop.
+
+    ``update(obs)`` adds one observation to the statistics (Gymnasium's ``RunningMeanStd`` in float64, updated
+    incrementally: Chan et al.'s parallel rule with a batch of one). ``scale(x)`` scales a batch of raw observations
+    in float32 torch, with the statistics as they are now; the float32 mean and 1/std are cached between updates,
+    so scaling a minibatch costs two tensor operations. ``rms`` is what a checkpoint and the saved policy keep.
+    """
+
+    def __init__(self, obs_dim: int, clip: float = 10.0):
+        from gymnasium.wrappers.utils import RunningMeanStd
+
+        self.rms = RunningMeanStd(shape=(obs_dim,))
+        self.clip = clip
+        self._cached: tuple[torch.Tensor, torch.Tensor] | None = None
+
+    def update(self, obs: np.ndarray) -> None:
+        rms, x = self.rms, np.asarray(obs, dtype=np.float64)
+        total = rms.count + 1.0
+        delta = x - rms.mean
+        rms.var = (rms.var * rms.count + delta**2 * rms.count / total) / total
+        rms.mean = rms.mean + delta / total
+        rms.count = total
+        self._cached = None
+
+    def scale(self, x: np.ndarray) -> torch.Tensor:
+        if self._cached is None:
+            self._cached = (torch.as_tensor(self.rms.mean, dtype=torch.float32),
+                            torch.as_tensor(1.0 / np.sqrt(self.rms.var + 1e-8), dtype=torch.float32))
+        mean, inv_std = self._cached
+        return ((torch.as_tensor(x, dtype=torch.float32) - mean) * inv_std).clamp_(-self.clip, self.clip)
+
+    def loaded(self) -> None:
+        """Call after the statistics in ``rms`` were replaced (a checkpoint was loaded)."""
+        self._cached = None

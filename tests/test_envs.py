@@ -68,3 +68,27 @@ def test_vec_env_seeds_each_copy():
 def test_space_shape():
     assert space_shape(gym.spaces.Discrete(4)) == (4,)
     assert space_shape(gym.spaces.Box(-1, 1, (3, 2))) == (3, 2)
+
+
+def test_observation_scaler_keeps_gymnasiums_statistics_and_scales_like_the_policy():
+    import numpy as np
+    import torch
+    from gymnasium.wrappers.utils import RunningMeanStd
+
+    from rlcore.envs import ObservationScaler, normalize_observation
+
+    rng = np.random.default_rng(0)
+    xs = rng.normal(3.0, [1.0, 100.0, 0.01], (300, 3))
+    scaler, reference = ObservationScaler(3), RunningMeanStd(shape=(3,))
+    first = scaler.scale(xs[:5]).clone()
+    for x in xs:
+        scaler.update(x)
+        reference.update(x[None])
+    np.testing.assert_allclose(scaler.rms.mean, reference.mean, rtol=1e-12)
+    np.testing.assert_allclose(scaler.rms.var, reference.var, rtol=1e-12)
+    assert scaler.rms.count == reference.count
+    scaled = scaler.scale(xs)
+    assert scaled.dtype == torch.float32 and not torch.equal(scaled[:5], first)  # the cache followed the update
+    np.testing.assert_allclose(scaled.numpy(), normalize_observation(xs, reference.mean, reference.var),
+                               rtol=1e-5, atol=1e-4)
+    assert scaler.scale(np.array([[1e9, 3.0, 3.0]])).max() == 10.0  # clipped as the policy clips
