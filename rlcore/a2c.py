@@ -31,7 +31,7 @@ from tqdm import tqdm
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
 from rlcore.config import check_budget, check_config
-from rlcore.envs import make_env
+from rlcore.envs import find_wrapper, make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.ppo import ACTIVATIONS, ActorCritic, PPOPolicy, make_agent, make_envs
@@ -263,14 +263,6 @@ def check_spaces(envs: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str,
         raise ValueError(str(exc).replace("PPO", "A2C")) from None
 
 
-def _find(envs, cls):
-    while not isinstance(envs, cls):
-        if not hasattr(envs, "env"):
-            return None
-        envs = envs.env
-    return envs
-
-
 @dataclass
 class Result:
     agent: ActorCritic
@@ -302,8 +294,8 @@ def train(
         raise
     agent = make_agent(spaces, config)
     optimizer = make_optimizer(agent, config)
-    obs_norm = _find(envs, gym.wrappers.vector.NormalizeObservation)
-    rew_norm = _find(envs, gym.wrappers.vector.NormalizeReward)
+    obs_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
+    rew_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeReward)
     eval_env = make_env(env_id, **config.env_kwargs)
     per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)

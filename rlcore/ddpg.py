@@ -27,11 +27,10 @@ from tqdm import tqdm
 from rlcore.buffers import ReplayBuffer
 from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
 from rlcore.config import check_budget, check_config
-from rlcore.dqn import soft_update
 from rlcore.envs import ObservationScaler, make_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
-from rlcore.nets import mlp
+from rlcore.nets import mlp, soft_update
 from rlcore.noise import AdaptiveParamNoise, GaussianNoise, OrnsteinUhlenbeckNoise
 from rlcore.runs import config_dict, episode_seed, open_run
 

@@ -70,7 +70,7 @@ from rlcore import ppo
 from rlcore.checkpoint import (CheckpointError, load_checkpoint, load_running_stats, running_stats_state,
                                save_checkpoint)
 from rlcore.config import check_budget
-from rlcore.envs import make_env
+from rlcore.envs import find_wrapper, make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
@@ -251,8 +251,8 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
     spaces = ppo.check_spaces(envs, env_id)
     agent = ppo.make_agent(spaces, config)
     optimizer = ppo.make_optimizer(agent, config)
-    obs_norm = ppo._find(envs, gym.wrappers.vector.NormalizeObservation)
-    rew_norm = ppo._find(envs, gym.wrappers.vector.NormalizeReward)
+    obs_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
+    rew_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeReward)
     eval_env = make_env(env_id, **config.env_kwargs) if rank == 0 and config.eval_every else None
     per_update = config.n_steps * config.num_envs * world
     iterations = -(-steps // per_update)

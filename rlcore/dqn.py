@@ -35,9 +35,9 @@ from rlcore.config import NON_NEGATIVE, check_budget, check_config
 from rlcore.envs import make_env
 from rlcore.evaluate import discounted_return, episode_rewards
 from rlcore.logger import CSVLogger
-from rlcore.nets import DuelingQNetwork, QNetwork
+from rlcore.nets import DuelingQNetwork, QNetwork, soft_update
 from rlcore.runs import config_dict, episode_seed, open_run
-from rlcore.tabular import linear_schedule
+from rlcore.schedules import linear_schedule
 
 
 POLICY_KEYS = ("q",)
@@ -145,13 +145,6 @@ def td_loss(q_values: torch.Tensor, targets: torch.Tensor, weights: torch.Tensor
     if weights is not None:
         per_sample = per_sample * weights
     return per_sample.mean()
-
-
-def soft_update(target: torch.nn.Module, source: torch.nn.Module, tau: float) -> None:
-    """theta' <- tau * theta + (1 - tau) * theta'  (tau = 1 copies)."""
-    with torch.no_grad():
-        for t, s in zip(target.parameters(), source.parameters()):
-            t.lerp_(s, tau)
 
 
 def greedy_action(q: torch.nn.Module, obs: np.ndarray) -> int:

@@ -157,3 +157,12 @@ class ObservationScaler:
     def loaded(self) -> None:
         """Call after the statistics in ``rms`` were replaced (a checkpoint was loaded)."""
         self._cached = None
+
+
+def find_wrapper(env: Any, cls: type) -> Any:
+    """The wrapper of type ``cls`` in ``env``'s chain of wrappers (``env`` itself included), or None."""
+    while not isinstance(env, cls):
+        if not hasattr(env, "env"):
+            return None
+        env = env.env
+    return env

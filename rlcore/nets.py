@@ -64,3 +64,13 @@ class DuelingQNetwork(nn.Module):
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         h = self.body(obs)
         return dueling_aggregate(self.value(h), self.advantage(h))
+
+
+# --- target networks ---------------------------------------------------------------------------
+
+
+def soft_update(target: torch.nn.Module, source: torch.nn.Module, tau: float) -> None:
+    """theta' <- tau * theta + (1 - tau) * theta'  (tau = 1 copies)."""
+    with torch.no_grad():
+        for t, s in zip(target.parameters(), source.parameters()):
+            t.lerp_(s, tau)

@@ -35,7 +35,7 @@ from tqdm import tqdm
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_checkpoint, load_running_stats, running_stats_state, save_checkpoint
 from rlcore.config import check_budget, check_config
-from rlcore.envs import make_env, make_vec_env, normalize_observation
+from rlcore.envs import find_wrapper, make_env, make_vec_env, normalize_observation
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
 from rlcore.nets import mlp
@@ -282,14 +282,6 @@ def make_envs(env_id: str, config: Config, seed: int) -> gym.vector.VectorEnv:
     return envs
 
 
-def _find(envs, cls):
-    while not isinstance(envs, cls):
-        if not hasattr(envs, "env"):
-            return None
-        envs = envs.env
-    return envs
-
-
 class Rollout:
     """One iteration's transitions, preallocated: arrays of shape ``(n_steps, num_envs[, dim])``.
 
@@ -433,8 +425,8 @@ def train(
                          "(set explore_noise=0).")
     agent = make_agent(spaces, config)
     optimizer = make_optimizer(agent, config)
-    obs_norm = _find(envs, gym.wrappers.vector.NormalizeObservation)
-    rew_norm = _find(envs, gym.wrappers.vector.NormalizeReward)
+    obs_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
+    rew_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeReward)
     eval_env = make_env(env_id, **config.env_kwargs)
     n_envs, T = config.num_envs, config.n_steps
     per_iter = T * n_envs

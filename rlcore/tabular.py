@@ -25,6 +25,7 @@ from rlcore.config import check_budget, check_config
 from rlcore.envs import make_env
 from rlcore.logger import CSVLogger
 from rlcore.runs import config_dict, episode_seed, open_run
+from rlcore.schedules import linear_schedule
 
 METHODS = ("q-learning", "sarsa")
 POLICY_KEYS = ("q",)
@@ -95,13 +96,6 @@ def epsilon_greedy(q_values: np.ndarray, epsilon: float, rng: np.random.Generato
         return int(rng.integers(len(q_values)))
     best = np.flatnonzero(q_values == q_values.max())
     return int(best[0] if len(best) == 1 else rng.choice(best))
-
-
-def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
-    """Linear interpolation from ``start`` (t=0) to ``end`` (t >= duration)."""
-    if duration <= 0:
-        return end
-    return start + (end - start) * min(t / duration, 1.0)
 
 
 def greedy_policy(Q: np.ndarray) -> np.ndarray:

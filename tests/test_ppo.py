@@ -200,7 +200,8 @@ def test_the_saved_policy_on_raw_observations_acts_as_the_training_wrapper_fed_t
 
     from rlcore.checkpoint import load_checkpoint, load_running_stats
     from rlcore.envs import make_env
-    from rlcore.ppo import _find, load_policy, make_envs
+    from rlcore.envs import find_wrapper
+    from rlcore.ppo import load_policy, make_envs
 
     config = Config(**SMALL)
     train("Pendulum-v1", config, steps=1_024, seed=0, out=tmp_path)
@@ -208,8 +209,8 @@ def test_the_saved_policy_on_raw_observations_acts_as_the_training_wrapper_fed_t
     policy = load_policy(ckpt)
 
     envs = make_envs("Pendulum-v1", config, seed=0)  # training's wrapper chain, with the run's final statistics
-    norm = _find(envs, gym.wrappers.vector.NormalizeObservation)
-    clip = _find(envs, gym.wrappers.vector.TransformObservation)
+    norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
+    clip = find_wrapper(envs, gym.wrappers.vector.TransformObservation)
     load_running_stats(norm.obs_rms, ckpt, "obs")
     norm.update_running_mean = False
 
