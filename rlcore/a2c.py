@@ -34,8 +34,8 @@ from rlcore.config import check_budget, check_config
 from rlcore.envs import find_wrapper, make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
-from rlcore.ppo import ACTIVATIONS, ActorCritic, PPOPolicy, make_agent, make_envs
-from rlcore.ppo import check_spaces as _ppo_check_spaces
+from rlcore.onpolicy import ACTIVATIONS, ActorCritic, PPOPolicy, make_agent, make_envs
+from rlcore.onpolicy import check_spaces as _check_spaces
 from rlcore.runs import config_dict, config_from_dict, open_run
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
@@ -256,11 +256,8 @@ def make_optimizer(agent: ActorCritic, config: Config) -> torch.optim.Optimizer:
 
 
 def check_spaces(envs: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str, Any]:
-    """PPO's check (flat observations; Discrete or flat Box actions), with A2C in its messages."""
-    try:
-        return _ppo_check_spaces(envs, env_id)
-    except ValueError as exc:
-        raise ValueError(str(exc).replace("PPO", "A2C")) from None
+    """The on-policy core's check (flat observations; Discrete or flat Box actions), with A2C in its messages."""
+    return _check_spaces(envs, env_id, "A2C")
 
 
 @dataclass

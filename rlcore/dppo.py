@@ -73,6 +73,7 @@ from rlcore.config import check_budget
 from rlcore.envs import find_wrapper, make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.logger import CSVLogger
+from rlcore.onpolicy import PPOPolicy, check_spaces, make_agent, make_envs
 from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
 from rlcore.ppo import Rollout, collect_rollout, ppo_update, rollout_batch
 from rlcore.runs import RunDir, config_dict, open_run
@@ -247,9 +248,9 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
     rank, world = dist.get_rank(), dist.get_world_size()
     worker_seed = seed + 1_000 * rank
     torch.manual_seed(seed)  # the same initial weights on every worker (DDP also broadcasts rank 0's)
-    envs = ppo.make_envs(env_id, config, worker_seed)
-    spaces = ppo.check_spaces(envs, env_id)
-    agent = ppo.make_agent(spaces, config)
+    envs = make_envs(env_id, config, worker_seed)
+    spaces = check_spaces(envs, env_id)
+    agent = make_agent(spaces, config)
     optimizer = ppo.make_optimizer(agent, config)
     obs_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
     rew_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeReward)
@@ -304,10 +305,10 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
     obs_base = snapshot(obs_norm.obs_rms) if obs_norm is not None else None
     ret_base = snapshot(rew_norm.return_rms) if rew_norm is not None else None
 
-    def policy() -> ppo.PPOPolicy:
+    def policy() -> PPOPolicy:
         mean = obs_norm.obs_rms.mean.copy() if obs_norm else None
         var = obs_norm.obs_rms.var.copy() if obs_norm else None
-        return ppo.PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
+        return PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
 
     log = eval_log = None
     if run is not None:
