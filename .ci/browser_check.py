@@ -313,16 +313,20 @@ def check_site(html_dir: Path, pages: list[str], source_dir: Path | None = None,
             # belt and braces next to the request filter below: no DNS for anything but the loopback server
             args=["--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1", "--disable-gpu"])
         try:
-            context = browser.new_context(viewport={"width": 1280, "height": 900}, service_workers="block")
-            context.route("**/*", lambda route: route.continue_() if _is_local(route.request.url, site.url)
-                          else route.abort("blockedbyclient"))
             for page in pages:
                 started = time.monotonic()
+                # a fresh context per page, as for a reader who opens this page first (no cache, no localStorage)
+                context = browser.new_context(viewport={"width": 1280, "height": 900}, service_workers="block")
+                context.route("**/*", lambda route: route.continue_() if _is_local(route.request.url, site.url)
+                              else route.abort("blockedbyclient"))
                 source = None
                 if source_dir is not None:
                     source = next((source_dir / f"{page}{suffix}" for suffix in (".md", ".ipynb", ".rst")
                                    if (source_dir / f"{page}{suffix}").is_file()), None)
-                result = check_page(context, site.url, html_dir, page, source, screenshots, known, timeout_s)
+                try:
+                    result = check_page(context, site.url, html_dir, page, source, screenshots, known, timeout_s)
+                finally:
+                    context.close()
                 results.append(result)
                 status = "ok" if not result.problems else f"{len(result.problems)} problem(s)"
                 log(f"  {page}: {status}; {result.images} images, {result.equations} equations typeset, "
@@ -331,7 +335,6 @@ def check_site(html_dir: Path, pages: list[str], source_dir: Path | None = None,
                     log(f"      - {problem}")
                 for message in result.known:
                     log(f"      known console message: {message}")
-            context.close()
         finally:
             browser.close()
     return results
