@@ -165,10 +165,11 @@ class PageResult:
 
 
 # Runs in the page after it loaded: the images, the math and the links it has.
-_INSPECT = """async () => {
+_INSPECT = """async (timeoutMs) => {
+    const timeout = () => new Promise(resolve => setTimeout(() => resolve("timeout"), timeoutMs));
     const images = [...document.images];
     for (const img of images) { img.loading = "eager"; }
-    await Promise.all(images.map(img => img.decode().catch(() => null)));
+    await Promise.race([Promise.all(images.map(img => img.decode().catch(() => null))), timeout()]);
     const result = {
         images: images.map(img => ({src: img.currentSrc || img.src, ok: img.complete && img.naturalWidth > 0})),
         mathElements: document.querySelectorAll(".math").length,
@@ -177,7 +178,7 @@ _INSPECT = """async () => {
         links: [...document.querySelectorAll("a[href]")].map(a => a.href),
     };
     if (result.mathjaxLoaded) {
-        await window.MathJax.startup.promise;
+        result.typesetTimedOut = (await Promise.race([window.MathJax.startup.promise, timeout()])) === "timeout";
         result.mathjaxVersion = window.MathJax.version;
         result.typeset = document.querySelectorAll("mjx-container").length;
         result.untypeset = [...document.querySelectorAll(".math")]
@@ -236,7 +237,7 @@ def check_page(context, site_url: str, html_dir: Path, page: str, source: Path |
             tab.wait_for_load_state("networkidle", timeout=timeout_s * 1000)
         except Exception:  # a page that keeps the network busy is not a failure by itself
             pass
-        info = tab.evaluate(_INSPECT)
+        info = tab.evaluate(_INSPECT, timeout_s * 1000)
         if shots is not None:
             shot = shots / f"{page}.png"
             shot.parent.mkdir(parents=True, exist_ok=True)
@@ -279,6 +280,8 @@ def check_page(context, site_url: str, html_dir: Path, page: str, source: Path |
                                    + (", ".join(info["mathjaxScripts"]) or "none") + ")")
         else:
             result.equations = info["typeset"]
+            if info["typesetTimedOut"]:
+                result.problems.append(f"MathJax had not finished typesetting after {timeout_s:g} s")
             if info["typeset"] == 0:
                 result.problems.append("the page has TeX but MathJax typeset nothing")
             result.problems.extend(f"math left untypeset: {text!r}" for text in info["untypeset"][:5])
@@ -304,8 +307,9 @@ def check_site(html_dir: Path, pages: list[str], source_dir: Path | None = None,
     executable = find_chromium(chromium)
     known = KNOWN_CONSOLE_ERRORS if known is None else known
     _anchors_of.cache_clear()
-    if screenshots is not None:
-        shutil.rmtree(screenshots, ignore_errors=True)
+    if screenshots is not None and screenshots.is_dir():
+        for old in screenshots.rglob("*.png"):  # screenshots of an earlier run, and nothing else
+            old.unlink()
     results = []
     with LocalSite(html_dir) as site, sync_playwright() as playwright:
         browser = playwright.chromium.launch(
@@ -345,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--html", type=Path, default=HTML, help="the built site (default: _build/html)")
     parser.add_argument("--toc", type=Path, default=ROOT / "_toc.yml", help="the pages to check (default: _toc.yml)")
     parser.add_argument("--screenshots", type=Path, default=SCREENSHOTS, help="where to save the screenshots "
-                        "(default: _build/browser; emptied first)")
+                        "(default: _build/browser; its old .png files are deleted first)")
     parser.add_argument("--chromium", help="the browser executable (default: $CHROMIUM, else chromium on PATH)")
     parser.add_argument("--timeout", type=float, default=60.0, help="seconds allowed to load one page (default: 60)")
     args = parser.parse_args(argv)
