@@ -194,7 +194,7 @@ def _is_local(url: str, base: str) -> bool:
     return url.startswith(base) or url.startswith(("data:", "blob:", "about:"))
 
 
-def _check_link(href: str, page_url: str, base: str, html_dir: Path) -> str | None:
+def _check_link(href: str, html_dir: Path) -> str | None:
     """None if a same-site link resolves (file and #anchor), else why not."""
     target, fragment = urldefrag(href)
     path = unquote(urlsplit(target).path)
@@ -228,7 +228,7 @@ def check_page(context, site_url: str, html_dir: Path, page: str, source: Path |
     tab.on("console", on_console)
     tab.on("pageerror", lambda error: console.append(f"uncaught {error.name}: {error.message}"))
     tab.on("requestfailed", lambda request: events.append(f"failed request {request.url} (" + (
-        request.failure if _is_local(request.url, site_url) else "blocked: not the local server") + ")"))
+        str(request.failure) if _is_local(request.url, site_url) else "blocked: not the local server") + ")"))
     tab.on("response", lambda response: response.status >= 400 and events.append(
         f"HTTP {response.status} for {response.url}"))
     try:
@@ -290,7 +290,7 @@ def check_page(context, site_url: str, html_dir: Path, page: str, source: Path |
     internal = sorted({link for link in info["links"] if link.startswith(site_url)})
     result.links = len(internal)
     for link in internal:
-        why = _check_link(link, url, site_url, html_dir)
+        why = _check_link(link, html_dir)
         if why:
             result.problems.append(why)
     return result
