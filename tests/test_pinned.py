@@ -1,0 +1,79 @@
+"""Default training is pinned: a short run of each algorithm must reproduce, bit for bit, the logged returns and
+the final parameters recorded in ``tests/data/pinned.json``.
+
+A refactoring of the loops (the training harness, the on-policy core) must not change what is learned; this test
+fails on any change that does. A change that *means* to change training (a fixed bug) re-records the pins with
+
+    python tests/test_pinned.py --record
+
+and says so in its commit. The pins are for this machine kind's CPU build of PyTorch (one thread).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+PINS = Path(__file__).parent / "data" / "pinned.json"
+
+SMALL_NETS = {"hidden": (32, 32)}
+RUNS = {
+    "q-learning": ("rlcore.tabular", "FrozenLake-v1", 3_000, {"env_kwargs": {"is_slippery": False}}),
+    "dqn": ("rlcore.dqn", "CartPole-v1", 1_500, {**SMALL_NETS, "learning_starts": 200, "train_freq": 4,
+                                                "gradient_steps": 2, "eval_every": 500, "eval_episodes": 2}),
+    "dqn-per-double-dueling": ("rlcore.dqn", "CartPole-v1", 1_500,
+                               {**SMALL_NETS, "learning_starts": 200, "train_freq": 4, "gradient_steps": 2,
+                                "eval_every": 0, "double": True, "dueling": True, "prioritized": True}),
+    "a2c": ("rlcore.a2c", "CartPole-v1", 2_000, {**SMALL_NETS, "num_envs": 4, "eval_every": 1_000,
+                                                "eval_episodes": 2}),
+    "ppo": ("rlcore.ppo", "Pendulum-v1", 1_024, {**SMALL_NETS, "num_envs": 2, "n_steps": 256, "batch_size": 64,
+                                                 "n_epochs": 2, "eval_every": 512, "eval_episodes": 2}),
+    "ddpg": ("rlcore.ddpg", "Pendulum-v1", 800, {**SMALL_NETS, "learning_starts": 200, "batch_size": 32,
+                                                 "eval_every": 400, "eval_episodes": 2}),
+    "ddpg-param": ("rlcore.ddpg", "Pendulum-v1", 800, {**SMALL_NETS, "learning_starts": 200, "batch_size": 32,
+                                                       "eval_every": 0, "exploration": "param"}),
+}
+
+
+def fingerprint(name: str, tmp: Path) -> dict:
+    import importlib
+
+    module_name, env_id, steps, overrides = RUNS[name]
+    module = importlib.import_module(module_name)
+    if module_name == "rlcore.tabular":
+        overrides = {**overrides, "method": "q-learning"}
+    torch.set_num_threads(1)
+    result = module.train(env_id, module.Config(**overrides), steps=steps, seed=7, out=tmp / name)
+    net = next(getattr(result, a) for a in ("Q", "q", "agent", "actor") if hasattr(result, a))
+    if isinstance(net, np.ndarray):
+        params = net.tobytes()
+    else:
+        params = b"".join(p.detach().numpy().tobytes() for p in net.state_dict().values())
+    evals = [float(x) for x in getattr(result, "eval_returns", [])]
+    return {"returns": [float(x) for x in result.episode_returns], "evals": evals,
+            "params_sha256": hashlib.sha256(params).hexdigest()}
+
+
+@pytest.mark.parametrize("name", list(RUNS))
+def test_default_training_is_unchanged(name, tmp_path):
+    pinned = json.loads(PINS.read_text())[name]
+    got = fingerprint(name, tmp_path)
+    assert got["returns"] == pinned["returns"]
+    assert got["evals"] == pinned["evals"]
+    assert got["params_sha256"] == pinned["params_sha256"]
+
+
+if __name__ == "__main__" and "--record" in sys.argv:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        pins = {name: fingerprint(name, Path(tmp)) for name in RUNS}
+    PINS.parent.mkdir(exist_ok=True)
+    PINS.write_text("{\n" + ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in pins.items()) + "\n}\n")
+    print(f"recorded {len(pins)} pins in {PINS}")
