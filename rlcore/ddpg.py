@@ -207,10 +207,12 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     config = config or Config()
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
+    # [ddpg-env]
     env = make_env(env_id, seed=seed, **config.env_kwargs)
     sp = check_spaces(env, env_id)
     if config.reward_scale != 1.0:
         env = gym.wrappers.TransformReward(env, lambda r: config.reward_scale * r)
+    # [/ddpg-env]
     eval_env = make_env(env_id, **config.env_kwargs)
     low, high = np.array(sp["low"]), np.array(sp["high"])
     actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, low, high)
@@ -227,12 +229,14 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     else:
         noise = None
     param_noise = AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed) if config.exploration == "param" else None
+    # [ddpg-normalize]
     scaler = ObservationScaler(sp["obs_dim"]) if config.normalize_obs else None
     obs_rms = None if scaler is None else scaler.rms
 
     def scaled(x: np.ndarray) -> torch.Tensor:
         """Observations as the networks see them: raw, or scaled by the running statistics (normalize_obs)."""
         return torch.as_tensor(x, dtype=torch.float32) if scaler is None else scaler.scale(x)
+    # [/ddpg-normalize]
 
     def policy() -> DeterministicPolicy:
         if obs_rms is None:
@@ -301,6 +305,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step", desc=f"DDPG {env_id}")
     try:
         while step < steps:
+            # [ddpg-act]
             # a_t = mu(s_t) + N_t
             if step < config.learning_starts:
                 action = rng.uniform(low, high).astype(np.float32)
@@ -311,6 +316,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                     action = np.clip(action + half * noise(), low, high).astype(np.float32)
             next_obs, reward, terminated, truncated, info = env.step(action)
             buffer.add(obs, action, reward, next_obs, terminated)
+            # [/ddpg-act]
             if scaler is not None:
                 scaler.update(next_obs)
             obs = next_obs
@@ -329,10 +335,13 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 ep_len = 0
                 if noise is not None:
                     noise.reset()
+                # [ddpg-param-noise]
                 if param_noise is not None and len(buffer) >= config.batch_size:
                     # adapt sigma on a fresh perturbation of the current actor, then perturb the next behaviour
                     param_noise.adapt_to(actor, scaled(buffer.sample(config.batch_size).obs))
                     behaviour = param_noise.perturb(actor)
+                # [/ddpg-param-noise]
+            # [ddpg-learn]
             if step >= config.learning_starts:
                 b = buffer.sample(config.batch_size)
                 o = scaled(b.obs)
@@ -342,6 +351,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 update_actor(actor, actor_opt, critic, o)
                 soft_update(actor_t, actor, config.tau)
                 soft_update(critic_t, critic, config.tau)
+            # [/ddpg-learn]
             if config.eval_every and step % config.eval_every == 0:
                 rets = evaluate_policy(policy(), eval_env, config.eval_episodes, seed=seed + 10_000)
                 actor.train()

@@ -300,19 +300,25 @@ def train(
             state["replay"] = buffer.state_dict()
         save_checkpoint(run.checkpoint, state)
 
+    # [dqn-schedule]
     decay_steps = int(config.exploration_fraction * steps)
+    # [/dqn-schedule]
     obs, _ = env.reset(seed=episode_seed(seed, episode))
     ep_return, ep_len = 0.0, 0
     bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step", desc=f"{config.variant} {env_id}")
     try:
         while step < steps:
+            # [dqn-act]
             epsilon = linear_schedule(config.epsilon_start, config.epsilon_end, decay_steps, step)
             if step < config.learning_starts or rng.random() < epsilon:
                 action = int(rng.integers(n_actions))
             else:
                 action = greedy_action(q, obs)
+            # [/dqn-act]
+            # [dqn-store]
             next_obs, reward, terminated, truncated, _ = env.step(action)
             buffer.add(obs, action, reward, next_obs, terminated)
+            # [/dqn-store]
             obs = next_obs
             step += 1
             ep_return += float(reward)
@@ -327,6 +333,7 @@ def train(
                 obs, _ = env.reset(seed=episode_seed(seed, episode))
                 ep_return, ep_len = 0.0, 0
 
+            # [dqn-learn]
             if step >= config.learning_starts and step % config.train_freq == 0:
                 beta = config.per_beta_start + (1.0 - config.per_beta_start) * min(step / steps, 1.0)
                 for _ in range(config.gradient_steps):
@@ -336,6 +343,7 @@ def train(
                         buffer.update_priorities(batch.indices, td_errors)
             if step % config.target_update_interval == 0:
                 soft_update(q_target, q, config.tau)
+            # [/dqn-learn]
             if config.eval_every and step % config.eval_every == 0:
                 evals.append({"step": step, **evaluate_q(q, eval_env, config.eval_episodes, seed + 10_000, config.gamma)})
                 if eval_log is not None:
