@@ -190,6 +190,17 @@ _INSPECT = """async (timeoutMs) => {
 }"""
 
 
+# Scrolls to the first visible equation (display math first) and says whether there is one.
+_SCROLL_TO_MATH = """() => {
+    const visible = el => el.getClientRects().length > 0 && el.getBoundingClientRect().height > 0;
+    const first = [...document.querySelectorAll("div.math mjx-container")].find(visible)
+        || [...document.querySelectorAll("mjx-container")].find(visible);
+    if (!first) { return false; }
+    window.scrollTo(0, window.scrollY + first.getBoundingClientRect().top - 120);
+    return true;
+}"""
+
+
 def _is_local(url: str, base: str) -> bool:
     return url.startswith(base) or url.startswith(("data:", "blob:", "about:"))
 
@@ -243,10 +254,7 @@ def check_page(context, site_url: str, html_dir: Path, page: str, source: Path |
             shot.parent.mkdir(parents=True, exist_ok=True)
             tab.screenshot(path=str(shot))
             result.screenshots.append(shot)
-            first = tab.query_selector("div.math mjx-container, mjx-container")
-            if first is not None:
-                first.scroll_into_view_if_needed()
-                tab.evaluate("window.scrollBy(0, -120)")
+            if tab.evaluate(_SCROLL_TO_MATH):
                 shot = shots / f"{page}.math.png"
                 tab.screenshot(path=str(shot))
                 result.screenshots.append(shot)
