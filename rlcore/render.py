@@ -218,19 +218,20 @@ def render_gif(
 
 
 def env_dt(env_id: str, env_kwargs: dict[str, Any] | None = None) -> float:
-    """Seconds of simulated time per environment step (``env.unwrapped.dt``), e.g. 0.008 for Hopper-v5.
+    """Seconds of simulated time per environment step, e.g. 0.008 for Hopper-v5.
 
-    Defined for the MuJoCo tasks; a task without a ``dt`` (the grid worlds) raises ``ValueError``.
+    ``env.unwrapped.dt`` (the MuJoCo tasks, Pendulum) or ``tau`` (CartPole); a task without either
+    (the grid worlds, which have no simulated time) raises ``ValueError``.
     """
     from rlcore.envs import make_env
 
     env = make_env(env_id, **dict(env_kwargs or {}))
     try:
-        dt = getattr(env.unwrapped, "dt", None)
+        dt = getattr(env.unwrapped, "dt", None) or getattr(env.unwrapped, "tau", None)
     finally:
         env.close()
     if dt is None:
-        raise ValueError(f"{env_id} has no simulation time step (env.unwrapped.dt)")
+        raise ValueError(f"{env_id} has no simulation time step (env.unwrapped.dt or .tau)")
     return float(dt)
 
 

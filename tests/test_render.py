@@ -69,6 +69,7 @@ def test_simulated_seconds_of_a_gif():
     assert env_dt("Hopper-v5") == pytest.approx(0.008)  # frame_skip 4 x timestep 0.002
     assert simulated_seconds("Hopper-v5", frames=150, frame_skip=5) == pytest.approx(6.0)
     assert simulated_seconds("HalfCheetah-v5", frames=120) == pytest.approx(6.0)
+    assert env_dt("CartPole-v1") == pytest.approx(0.02)  # CartPole calls its step tau
     with pytest.raises(ValueError):
         env_dt("FrozenLake-v1")
 
