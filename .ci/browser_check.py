@@ -306,7 +306,7 @@ def check_page(context, site_url: str, html_dir: Path, page: str, source: Path |
 
 def check_site(html_dir: Path, pages: list[str], source_dir: Path | None = None, screenshots: Path | None = None,
                chromium: str | None = None, known: list[tuple[str, str]] | None = None,
-               timeout_s: float = 60.0, log=print) -> list[PageResult]:
+               timeout_s: float = 60.0, log=functools.partial(print, flush=True)) -> list[PageResult]:
     """Check ``pages`` (paths without suffix, as in _toc.yml) of the site in ``html_dir``; one result per page."""
     try:
         from playwright.sync_api import sync_playwright
@@ -370,7 +370,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     pages = toc_pages(yaml.safe_load(args.toc.read_text(encoding="utf-8")))
     print(f"Checking {len(pages)} pages of {args.toc.name} in {find_chromium(args.chromium)}, served from "
-          f"{html_dir} on 127.0.0.1 (every other host blocked):")
+          f"{html_dir} on 127.0.0.1 (every other host blocked):", flush=True)
     results = check_site(html_dir, pages, source_dir=args.toc.resolve().parent, screenshots=args.screenshots,
                          chromium=args.chromium, timeout_s=args.timeout)
     failed = [r for r in results if r.problems]
