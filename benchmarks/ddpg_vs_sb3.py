@@ -2,6 +2,10 @@
 
     pip install -r requirements.txt -r benchmarks/requirements.txt
     python benchmarks/ddpg_vs_sb3.py --env HalfCheetah-v5 --steps 6000 --learning-starts 1000 --repeats 2
+    python benchmarks/ddpg_vs_sb3.py --env Humanoid-v5 --steps 4000 --learning-starts 1000 --repeats 2
+
+After the timed runs, one more rlcore run measures where its time goes: the share spent in the networks'
+arithmetic (critic and actor updates, soft target updates), in the simulator (``env.step``) and in the rest.
 
 Both train from scratch in this one process, one after the other (alternating over ``--repeats``),
 with one torch thread each, no evaluation, no checkpoints and no logging during training. The figure is
@@ -72,6 +76,51 @@ def sb3_ddpg(env_id: str, steps: int, seed: int, cfg: dict) -> float:
     return time.perf_counter() - start
 
 
+def where_the_time_goes(env_id: str, steps: int, seed: int, cfg: dict) -> dict[str, float]:
+    """Seconds of one rlcore training run spent in the networks' arithmetic (the critic and actor updates and the
+    soft target updates: forward, backward and Adam), in the simulator (``env.step``), and in everything else
+    (acting, replay sampling, bookkeeping), timed by wrapping rlcore.ddpg's own functions for this run."""
+    import gymnasium as gym
+
+    from rlcore import ddpg
+
+    spent = {"networks": 0.0, "simulator": 0.0}
+
+    def timed(fn, key):
+        def wrapper(*args, **kwargs):
+            t = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[key] += time.perf_counter() - t
+        return wrapper
+
+    class TimedStep(gym.Wrapper):
+        def step(self, action):
+            t = time.perf_counter()
+            try:
+                return self.env.step(action)
+            finally:
+                spent["simulator"] += time.perf_counter() - t
+
+    saved = {name: getattr(ddpg, name) for name in ("update_critic", "update_actor", "soft_update", "make_env")}
+    ddpg.update_critic = timed(saved["update_critic"], "networks")
+    ddpg.update_actor = timed(saved["update_actor"], "networks")
+    ddpg.soft_update = timed(saved["soft_update"], "networks")
+    ddpg.make_env = lambda *a, **k: TimedStep(saved["make_env"](*a, **k))
+    try:
+        total = rlcore_ddpg(env_id, steps, seed, cfg)
+    finally:
+        for name, fn in saved.items():
+            setattr(ddpg, name, fn)
+    learning = steps - cfg["learning_starts"]
+    return {"seconds_total": total, "seconds_networks": spent["networks"], "seconds_simulator": spent["simulator"],
+            "seconds_rest": total - spent["networks"] - spent["simulator"],
+            "share_networks": spent["networks"] / total, "share_simulator": spent["simulator"] / total,
+            "share_rest": 1 - (spent["networks"] + spent["simulator"]) / total,
+            "ms_per_learning_step_networks": 1e3 * spent["networks"] / max(learning, 1)}
+
+
 def warm_up(env_id: str) -> None:
     """Pay the process's one-time costs before any timing: the MuJoCo environment's first construction and
     PyTorch's lazy import of torch._dynamo in the first optimizer (seconds, which whichever library ran first
@@ -89,8 +138,13 @@ def main() -> None:
     p.add_argument("--learning-starts", type=int, default=None, help="default: rlcore.ddpg.Config's")
     p.add_argument("--repeats", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="results/benchmarks/ddpg-vs-sb3.json")
+    p.add_argument("--out", default=None, help="default: results/benchmarks/ddpg-vs-sb3.json for HalfCheetah-v5, "
+                   "ddpg-vs-sb3-<task>.json for another task")
     args = p.parse_args()
+    if args.out is None:
+        task = args.env.split("-")[0].lower()
+        args.out = "results/benchmarks/ddpg-vs-sb3.json" if task == "halfcheetah" else \
+            f"results/benchmarks/ddpg-vs-sb3-{task}.json"
     torch.set_num_threads(1)
     load_start = os.getloadavg()
 
@@ -114,6 +168,9 @@ def main() -> None:
             times[name].append(t)
             print(f"repeat {r + 1}/{args.repeats}  {name:6s}  {args.steps / t:8.0f} env-steps/s  ({t:.1f} s)  "
                   f"load {os.getloadavg()[0]:.2f}", flush=True)
+    profile = where_the_time_goes(args.env, args.steps, args.seed, cfg)
+    print(f"where rlcore's time goes: networks {profile['share_networks']:.0%}, simulator "
+          f"{profile['share_simulator']:.0%}, the rest {profile['share_rest']:.0%}", flush=True)
     load_end = os.getloadavg()
     sps = {k: args.steps / statistics.median(v) for k, v in times.items()}
     ratio = sps["rlcore"] / sps["sb3"]
@@ -132,7 +189,7 @@ def main() -> None:
         "hyperparameters": {**{k: list(v) if isinstance(v, tuple) else v for k, v in cfg.items()},
                             "train_freq": 1, "gradient_steps": 1},
         "seconds": times, "env_steps_per_second_per_repeat": {k: [args.steps / t for t in v] for k, v in times.items()},
-        "env_steps_per_second": sps, "ratio_rlcore_over_sb3": ratio, "target_ratio": 1.5,
+        "env_steps_per_second": sps, "ratio_rlcore_over_sb3": ratio, "rlcore_time_shares": profile,
         "command": f"{command} --repeats {args.repeats}",
         "versions": {"rlcore": rlcore.__version__, "stable_baselines3": stable_baselines3.__version__,
                      "torch": torch.__version__, "gymnasium": gymnasium.__version__, "mujoco": mujoco.__version__,
