@@ -31,6 +31,9 @@ NBVAL_DIR = ROOT / "tests" / "_nbval"
 
 # The tests use the small budget; the book build (which does not read this file) uses "book".
 os.environ.setdefault("RLBOOK_PROFILE", "quick")
+# The tests run in two processes (pytest-xdist, see pyproject.toml), each chapter in its own kernel: one thread
+# per process keeps them from crowding each other's core (the book's networks are too small to gain from two).
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 # nbval collects every .ipynb it meets. The converted chapters in tests/_nbval/ are collected through
 # their .md source instead, and a chapter converted by hand (chapters/NN_name.ipynb) would run twice.

@@ -405,23 +405,29 @@ def run_in_pool(fn: Callable[..., Any], calls: list[tuple], jobs: int):
 
     # spawn, not fork: safe from a Jupyter kernel, whose threads a fork would copy half-way
     ctx = multiprocessing.get_context("spawn")
-    todo = list(calls)
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=stop_on_signals, initargs=(True,)) as pool:
-        running = {pool.submit(fn, *todo.pop(0)) for _ in range(min(jobs, len(todo)))}
-        try:
-            while running:
-                done, running = wait(running, return_when=FIRST_COMPLETED)
-                # every call that finished is looked at before any new one starts: a failure among them raises
-                # here, nothing new is submitted, and the with-block waits for the calls still running
-                results = [fut.result() for fut in done]
-                for result in results:
-                    if todo:
-                        running.add(pool.submit(fn, *todo.pop(0)))
-                    yield result
-        except (KeyboardInterrupt, GeneratorExit):  # interrupted, or the caller stopped asking for results
-            for child in multiprocessing.active_children():  # the pool's workers
-                os.kill(child.pid, signal.SIGINT)
-            raise
+        yield from schedule(pool, fn, calls, jobs)
+
+
+def schedule(pool: Any, fn: Callable[..., Any], calls: list[tuple], jobs: int):
+    """:func:`run_in_pool`'s rule, for any executor: at most ``jobs`` calls running, a new one submitted only when
+    one has finished, and none after a failure or an interrupt (which is passed on to the pool's workers)."""
+    todo = list(calls)
+    running = {pool.submit(fn, *todo.pop(0)) for _ in range(min(jobs, len(todo)))}
+    try:
+        while running:
+            done, running = wait(running, return_when=FIRST_COMPLETED)
+            # every call that finished is looked at before any new one starts: a failure among them raises
+            # here, nothing new is submitted, and the executor waits for the calls still running
+            results = [fut.result() for fut in done]
+            for result in results:
+                if todo:
+                    running.add(pool.submit(fn, *todo.pop(0)))
+                yield result
+    except (KeyboardInterrupt, GeneratorExit):  # interrupted, or the caller stopped asking for results
+        for child in multiprocessing.active_children():  # the pool's workers
+            os.kill(child.pid, signal.SIGINT)
+        raise
 
 
 def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,

@@ -29,27 +29,64 @@ def tiny(monkeypatch):
 
 
 def _mark_or_fail(folder, i):
-    """A stand-in for one seed's training, in a pool worker: call 0 fails at once; call 1 finishes only once call 0
-    has failed (it waits for that event, not for a fixed time); the others just leave a mark."""
-    gate = Path(folder) / "failing-0"
+    """A stand-in for one seed's training, in a pool worker: call 0 fails at once, the others leave a mark."""
     if i == 0:
-        gate.touch()
         raise RuntimeError("seed 0 failed")
-    if i == 1:
-        deadline = time.monotonic() + 60
-        while not gate.exists() and time.monotonic() < deadline:
-            time.sleep(0.01)
     (Path(folder) / f"ran-{i}").touch()
     return i
 
 
 def test_pool_starts_nothing_new_after_a_failure(tmp_path):
-    # two workers: call 0 fails while call 1 runs; calls 2 and 3 must never start (an interrupted run stops too),
-    # while call 1, already running, is waited for
+    # one worker, so the order is fixed: call 0 fails, and calls 1 and 2 must never start
     with pytest.raises(RuntimeError, match="seed 0 failed"):
-        list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in range(4)], jobs=2))
-    assert sorted(f.name for f in tmp_path.iterdir()) == ["failing-0", "ran-1"]
+        list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in range(3)], jobs=1))
+    assert list(tmp_path.iterdir()) == []
     assert list(ex.run_in_pool(_mark_or_fail, [(str(tmp_path), i) for i in (3, 2)], jobs=2)) in ([3, 2], [2, 3])
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["ran-2", "ran-3"]
+
+
+class ControlledPool:
+    """An executor whose calls finish when the test says so: calls in ``at_once`` finish as they are submitted,
+    the others when the test calls ``finish(i)``; call 0 fails."""
+
+    def __init__(self, at_once=()):
+        self.at_once, self.submitted, self.futures = set(at_once), [], {}
+
+    def submit(self, fn, folder, i):
+        from concurrent.futures import Future
+
+        self.submitted.append(i)
+        self.futures[i] = Future()
+        if i in self.at_once:
+            self.finish(i)
+        return self.futures[i]
+
+    def finish(self, i):
+        if i == 0:
+            self.futures[i].set_exception(RuntimeError("seed 0 failed"))
+        else:
+            self.futures[i].set_result(i)
+
+
+def test_schedule_submits_nothing_after_a_failure():
+    # call 0 fails while call 1 runs: nothing new is submitted, and the error comes out
+    pool = ControlledPool(at_once=[0])
+    with pytest.raises(RuntimeError, match="seed 0 failed"):
+        list(ex.schedule(pool, None, [("x", i) for i in range(4)], jobs=2))
+    assert pool.submitted == [0, 1]
+
+
+def test_schedule_starts_nothing_for_a_call_that_finished_alongside_a_failure():
+    # call 1 succeeds first and call 2 takes its place; then call 0 fails in the same round as call 2 succeeds:
+    # call 3 must not start, although call 2 freed a worker
+    pool = ControlledPool(at_once=[1])
+    gen = ex.schedule(pool, None, [("x", i) for i in range(4)], jobs=2)
+    assert next(gen) == 1 and pool.submitted == [0, 1, 2]
+    pool.finish(2)
+    pool.finish(0)
+    with pytest.raises(RuntimeError, match="seed 0 failed"):
+        next(gen)
+    assert pool.submitted == [0, 1, 2]
 
 
 def _signal_self(sig):
