@@ -376,6 +376,7 @@ def train(
                unit="step", desc=f"PPO-{config.objective} {env_id}")
     try:
         while iteration < iterations:
+            # [ppo-loop]
             lr = config.learning_rate * (1.0 - iteration / iterations if config.anneal_lr else 1.0)
             for g in optimizer.param_groups:
                 g["lr"] = lr
@@ -388,6 +389,7 @@ def train(
                 kl_coef = adaptive_kl_coef(kl_coef, mean_kl, config.kl_target, config.kl_beta_low,
                                            config.kl_beta_high, config.kl_alpha)
             iteration += 1
+            # [/ppo-loop]
             if run is not None:
                 m = np.mean(stats, axis=0)
                 upd_log.log(iteration=iteration, step=step, policy_loss=m[0], value_loss=m[1], entropy=m[2],
