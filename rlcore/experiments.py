@@ -547,7 +547,8 @@ def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list
 
 
 def provenance_markdown(name: str, run: RunResults, command: str | None = None) -> str:
-    """A line to print under a figure: which seeds, how many steps, made by which command, commit, versions.
+    """What to print under a figure: which seeds, how many steps, made by which command, commit, versions, in a
+    collapsed dropdown ("Provenance: <run>").
 
     A live stand-in, or seeds still missing from ``results/``, get a visible warning.
     """
@@ -582,10 +583,12 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
             notes.setdefault(s.meta["provenance_note"], []).append(s.seed)
     text += "".join(f" Seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}: {note}"
                     for note, seeds in notes.items())
+    # the record a reader may want, folded under the figure; what a reader must see stays visible
+    text = f"::::{{dropdown}} Provenance: {run.label}\n{text}\n::::\n"
     if run.missing:
-        text += (f"\n\n:::{{warning}}\nSeeds {run.missing} of *{run.label}* are not in `{folder}` yet; this page "
-                 f"shows the {len(seeds)} that are. Run `{command}` to finish them.\n:::")
-    return text + "\n"
+        text += (f"\n:::{{warning}}\nSeeds {run.missing} of *{run.label}* are not in `{folder}` yet; this page "
+                 f"shows the {len(seeds)} that are. Run `{command}` to finish them.\n:::\n")
+    return text
 
 
 def status_lines(name: str, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:

@@ -212,6 +212,8 @@ def test_load_or_train_falls_back_to_a_live_run_and_says_so(tiny, tmp_path):
     text = ex.provenance_markdown("tiny", stored)
     assert "seeds [0] (1 of 1), 600 steps" in text and "python -m rlcore experiments run tiny" in text
     assert "{warning}" not in text and "loaded its code earlier" not in text
+    # the record is folded under the figure, in a dropdown named after the run
+    assert text.startswith(f"::::{{dropdown}} Provenance: {stored.label}\n") and text.rstrip().endswith("::::")
     stored.seeds[0].meta.update(checkout_at_start="fedcba9876", provenance_note="Trained before the fix.")
     text = ex.provenance_markdown("tiny", stored)
     assert "seed 0 (the checkout was already at fedcba9)" in text and "Seed 0: Trained before the fix." in text
