@@ -3,10 +3,8 @@
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -37,40 +35,21 @@ def _same(a, b) -> bool:
     return a == b
 
 
-def _workers(pid: int) -> dict[int, int]:
-    """{rank: pid} of torchrun's worker processes (its children with a RANK in their environment)."""
-    out = {}
-    for child in Path(f"/proc/{pid}/task/{pid}/children").read_text().split():
-        try:
-            env = dict(kv.split("=", 1) for kv in Path(f"/proc/{child}/environ").read_text().split("\0") if "=" in kv)
-        except OSError:
-            continue
-        if "RANK" in env:
-            out[int(env["RANK"])] = int(child)
-    return out
-
-
 @pytest.fixture(scope="module")
 def killed_and_restarted(tmp_path_factory):
-    """A 2-worker torchrun job on Pendulum whose rank 1 is killed after two updates; torchrun restarts it once."""
+    """A 2-worker torchrun job on Pendulum whose rank 1 dies (SIGKILL) as it starts its third update (after two
+    updates were logged and checkpointed); torchrun restarts the job once, and it resumes from the checkpoint."""
     out = tmp_path_factory.mktemp("dppo") / "run"
+    marker = out.parent / "killed"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--standalone", "--max-restarts", "1",
-           "-m", "rlcore.dppo", "--env", "Pendulum-v1", "--steps", str(BUDGET), "--seed", "3", "--out", str(out),
+           "-m", "_dppo_dies_once", "--env", "Pendulum-v1", "--steps", str(BUDGET), "--seed", "3", "--out", str(out),
            "--no-progress", "--dump-params", str(out / "dump"), *TINY]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    killed = None
-    deadline = time.monotonic() + 60
-    while killed is None and proc.poll() is None and time.monotonic() < deadline:
-        progress = out / "progress.csv"
-        if progress.exists() and len(progress.read_text().splitlines()) >= 3:  # header + two updates
-            killed = _workers(proc.pid).get(1)
-            if killed:
-                os.kill(killed, signal.SIGKILL)
-        time.sleep(0.02)
-    log, _ = proc.communicate(timeout=120)
-    assert proc.returncode == 0, log
-    assert killed is not None, "the job ended before a worker could be killed:\n" + log
-    return out, log
+    env = {**os.environ, "RLCORE_TEST_DIE_ONCE": str(marker),
+           "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stdout
+    assert marker.exists(), "worker 1 never died:\n" + proc.stdout
+    return out, proc.stdout
 
 
 def test_workers_hold_identical_weights_optimizer_and_statistics(killed_and_restarted):
