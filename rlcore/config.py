@@ -103,6 +103,8 @@ def check_config(config: Any) -> None:
                 raise ValueError(f"{name} must be a finite number, got {value!r}")
         elif hint is str and not isinstance(value, str):
             raise ValueError(f"{name} must be a string, got {value!r}")
+        elif typing.get_origin(hint) is dict and not isinstance(value, dict):
+            raise ValueError(f"{name} must be a JSON object such as {{\"is_slippery\": false}}, got {value!r}")
 
 
 def check_budget(steps: Any, seed: Any) -> None:
