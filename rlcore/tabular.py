@@ -290,3 +290,29 @@ def make_config(algo: str, **overrides: Any) -> Config:
 def load_policy(ckpt: dict[str, Any]) -> TabularPolicy:
     """The greedy policy stored in a checkpoint written by :func:`train`."""
     return TabularPolicy(ckpt["q"].numpy())
+
+
+def grid_map(env_id: str, **env_kwargs: Any) -> np.ndarray:
+    """The map of a grid world as an array of letters: S start, F free, H hole, C cliff, G goal.
+
+    FrozenLake's map is its ``desc``. CliffWalking publishes no map, so the cliff is read from its transition
+    table: the cells a move into costs -100 and sends the agent back to the start.
+    """
+    env = gym.make(env_id, **env_kwargs).unwrapped
+    if env_id.startswith("FrozenLake"):
+        return env.desc.astype(str)
+    if not env_id.startswith("CliffWalking"):
+        raise ValueError(f"grid_map knows FrozenLake and CliffWalking, not {env_id}")
+    rows, cols = env.shape
+    moves = [(-1, 0), (0, 1), (1, 0), (0, -1)]  # CliffWalking's actions: up, right, down, left
+    grid = np.full(env.shape, "F")
+    for s, actions in env.P.items():
+        r, c = np.unravel_index(s, env.shape)
+        for a, outcomes in actions.items():
+            if any(reward == -100 for _, _, reward, _ in outcomes):
+                dr, dc = moves[a]
+                if 0 <= r + dr < rows and 0 <= c + dc < cols:
+                    grid[r + dr, c + dc] = "C"
+    grid[np.unravel_index(env.start_state_index, env.shape)] = "S"
+    grid[-1, -1] = "G"
+    return grid

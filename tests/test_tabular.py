@@ -163,3 +163,13 @@ def test_learned_table_agrees_with_value_iteration_on_the_greedy_path():
         assert Q_star[s, a] == Q_star[s].max()  # every greedy step is an optimal action
         s, _, done, _, _ = env.step(a)
     assert done
+
+
+def test_grid_map_reads_the_cliff_from_the_transitions():
+    from rlcore.tabular import grid_map
+
+    cliff = grid_map("CliffWalking-v1")
+    assert cliff.shape == (4, 12) and cliff[3, 0] == "S" and cliff[3, 11] == "G"
+    assert (cliff[3, 1:11] == "C").all() and (cliff[:3] == "F").all()
+    lake = grid_map("FrozenLake-v1")
+    assert lake[0, 0] == "S" and lake[3, 3] == "G" and (lake == "H").sum() == 4
