@@ -72,21 +72,27 @@ def plot_learning_curves(
     num_points: int = 100,
     smoothing: int = 1,
     title: str | None = None,
+    seeds: bool = True,
 ):
     """Plot one mean curve with a band per label; ``runs[label]`` is a list of per-seed ``(x, y)``.
 
-    ``smoothing`` is a moving-average window applied to each seed's ``y`` before averaging.
-    Returns the matplotlib ``Axes``.
+    ``smoothing`` is a moving-average window applied to each seed's ``y`` before averaging. With ``seeds`` (the
+    default), every seed's own curve is drawn too, thin, in the label's colour: with 3 to 5 seeds a band alone
+    hides whether one seed failed while the others learned. Returns the matplotlib ``Axes``.
     """
     import matplotlib.pyplot as plt
 
     if ax is None:
         _, ax = plt.subplots(figsize=(6.4, 4))
-    for label, seeds in runs.items():
-        grid, ys = align_runs([(x, smooth(y, smoothing)) for x, y in seeds], num_points)
+    for label, per_seed in runs.items():
+        grid, ys = align_runs([(x, smooth(y, smoothing)) for x, y in per_seed], num_points)
         mean, lo, hi = mean_and_band(ys, band)
-        (line,) = ax.plot(grid, mean, label=f"{label} ({len(seeds)} seed{'s' if len(seeds) != 1 else ''})")
+        n = len(per_seed)
+        (line,) = ax.plot(grid, mean, label=f"{label} ({n} seed{'s' if n != 1 else ''})")
         ax.fill_between(grid, lo, hi, color=line.get_color(), alpha=0.2, linewidth=0)
+        if seeds and n > 1:
+            for y in ys:
+                ax.plot(grid, y, color=line.get_color(), alpha=0.35, linewidth=0.6)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     if title:

@@ -36,12 +36,24 @@ def test_bands():
 def test_plot_draws_one_line_and_band_per_label():
     x = np.arange(10)
     runs = {"a": [(x, x * 1.0), (x, x * 2.0)], "b": [(x, -x * 1.0)]}
-    ax = plot_learning_curves(runs, title="t")
+    ax = plot_learning_curves(runs, title="t", seeds=False)
     assert len(ax.lines) == 2
     assert len(ax.collections) == 2  # the bands
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert labels == ["a (2 seeds)", "b (1 seed)"]
     np.testing.assert_allclose(ax.lines[0].get_ydata()[-1], 13.5)  # mean of 9 and 18
+
+
+def test_plot_draws_each_seed_over_the_band_in_its_labels_colour():
+    x = np.arange(10)
+    runs = {"a": [(x, x * 1.0), (x, x * 2.0)], "b": [(x, -x * 1.0)]}
+    ax = plot_learning_curves(runs)
+    # a: the mean and its two seeds; b: one seed is its own mean, drawn once
+    assert len(ax.lines) == 4
+    mean_a, seed_a0, seed_a1, mean_b = ax.lines
+    assert seed_a0.get_color() == seed_a1.get_color() == mean_a.get_color() != mean_b.get_color()
+    assert {seed_a0.get_ydata()[-1], seed_a1.get_ydata()[-1]} == {9.0, 18.0}
+    assert seed_a0.get_linewidth() < mean_a.get_linewidth()
 
 
 def test_plot_scaling_draws_one_speed_up_line_per_way_of_sharing_and_the_learning_curves(scaling_record):
