@@ -42,6 +42,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote, urldefrag, urljoin, urlsplit
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from check_book import toc_pages  # noqa: E402 (the one reader of _toc.yml, shared with the book check)
+
 ROOT = Path(__file__).resolve().parent.parent
 HTML = ROOT / "_build" / "html"
 SCREENSHOTS = ROOT / "_build" / "browser"
@@ -75,21 +78,6 @@ def find_chromium(explicit: str | None = None) -> str:
         if path:
             return path
     raise SystemExit(f"No Chromium on this machine (looked for {', '.join(CHROMIUM_CANDIDATES)}). {INSTALL_HINT}")
-
-
-def toc_pages(node: object) -> list[str]:
-    """Every `root:` and `file:` entry of a jupyter-book _toc.yml, in order."""
-    found: list[str] = []
-    if isinstance(node, dict):
-        for key, value in node.items():
-            if key in ("root", "file") and isinstance(value, str):
-                found.append(value)
-            else:
-                found.extend(toc_pages(value))
-    elif isinstance(node, list):
-        for item in node:
-            found.extend(toc_pages(item))
-    return found
 
 
 def source_has_tex(text: str) -> bool:
