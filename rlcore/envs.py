@@ -67,7 +67,7 @@ def make_env(
     """
     check_env_id(env_id)
     if render_mode == "rgb_array" and is_mujoco(env_id):
-        from rlcore.render import select_gl_backend
+        from rlcore.gl import select_gl_backend
 
         select_gl_backend()
     env = gym.make(env_id, render_mode=render_mode, **gym_kwargs)

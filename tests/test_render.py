@@ -4,13 +4,13 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from rlcore import render
+from rlcore import gl
 from rlcore.render import (HeadlessGLError, env_dt, frames_to_gif, render_gif, rollout_frames, select_gl_backend,
                            simulated_seconds)
 
 
 def test_no_working_backend_names_what_to_install(monkeypatch):
-    monkeypatch.setattr(render, "probe_gl_backend", lambda backend: (False, "cannot open display"))
+    monkeypatch.setattr(gl, "probe_gl_backend", lambda backend: (False, "cannot open display"))
     with pytest.raises(HeadlessGLError) as err:
         select_gl_backend(["egl", "osmesa"])
     msg = str(err.value)
@@ -20,14 +20,14 @@ def test_no_working_backend_names_what_to_install(monkeypatch):
 
 
 def test_a_bogus_backend_really_fails_in_the_probe():
-    works, why = render.probe_gl_backend("not-a-backend")
+    works, why = gl.probe_gl_backend("not-a-backend")
     assert not works
     assert why  # the reason is reported
 
 
 def test_first_working_backend_is_chosen(monkeypatch):
-    monkeypatch.setattr(render, "probe_gl_backend", lambda b: (b == "osmesa", "nope"))
-    monkeypatch.setattr(render, "_selected", None)
+    monkeypatch.setattr(gl, "probe_gl_backend", lambda b: (b == "osmesa", "nope"))
+    monkeypatch.setattr(gl, "_selected", None)
     monkeypatch.setenv("MUJOCO_GL", "egl")
     monkeypatch.setenv("PYOPENGL_PLATFORM", "egl")
     assert select_gl_backend(["egl", "osmesa"]) == "osmesa"
