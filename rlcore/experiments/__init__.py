@@ -1,0 +1,73 @@
+"""Full-budget experiments: the named, resumable runs whose outputs the book shows.
+
+    python -m rlcore experiments list
+    python -m rlcore experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
+    python -m rlcore experiments status dqn-cartpole
+
+Each run trains in a work folder (``runs/<experiment>/<run>/seed-<s>/``, not committed: it holds
+full checkpoints with replay memories) and, when it finishes, its small outputs are copied to
+``results/<experiment>/<run>/seed-<s>/``:
+
+    config.json  meta.json     what ran: algorithm, environment, Config, seed, steps; command, versions, commit
+    progress.csv eval.csv      per-episode training returns; periodic evaluations of the deterministic policy
+    policy.pt                  the final policy's weights only (loads with weights_only=True)
+
+Chapters read ``results/`` with :func:`load_experiment`; a run that is missing there is reported so
+that the chapter can say so and fall back to a short live run.
+
+The package, one idea a module:
+
+- :mod:`rlcore.experiments.registry`: the named experiments (``RunSpec``, ``Experiment``, ``EXPERIMENTS``);
+- :mod:`rlcore.experiments.runner`: training them, one process per core, resumable;
+- :mod:`rlcore.experiments.results`: reading ``results/`` (or a short live stand-in) and its provenance;
+- :mod:`rlcore.experiments.analysis`: the statistics and tables the chapters quote.
+
+Everything is importable from ``rlcore.experiments`` itself.
+"""
+
+from __future__ import annotations
+
+from rlcore.experiments.registry import (  # noqa: F401
+    REPO_ROOT,
+    RESULTS_DIR,
+    WORK_DIR,
+    RunSpec,
+    Experiment,
+    ZOO_PPO,
+    REPORT_DDPG,
+    REPORT_DDPG_SEEDS,
+    REPORT_DDPG_SWEEPS,
+    REPORT_DDPG_HUMANOID,
+    MODERN_DDPG,
+    REPORT_PPO_HOPPER,
+    REPORT_PPO_HALFCHEETAH,
+    REPORT_PPO_HALFCHEETAH_RUNS,
+    EXPERIMENTS,
+    get_experiment,
+    run_paths,
+)
+from rlcore.experiments.runner import (  # noqa: F401
+    export_policy,
+    train_one,
+    run_in_pool,
+    schedule,
+    run_experiment,
+)
+from rlcore.experiments.results import (  # noqa: F401
+    SeedResult,
+    RunResults,
+    load_experiment,
+    load_or_train,
+    provenance_markdown,
+    status_lines,
+)
+from rlcore.experiments.analysis import (  # noqa: F401
+    first_step_reaching,
+    report_metric,
+    seeds_table,
+    gap_and_spread,
+    scaling_runs,
+    learning_seconds,
+    scaling_rows,
+    markdown_table,
+)

@@ -1,0 +1,104 @@
+"""The statistics and tables the chapters quote: first step reaching a threshold, the report's own metric, the gap
+between settings and the spread across seeds, DPPO's scaling rows, Markdown tables.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from rlcore.experiments.results import RunResults
+
+
+def first_step_reaching(evals: dict[str, np.ndarray], threshold: float) -> int | None:
+    """The first evaluation step whose mean return is >= ``threshold`` (None if never)."""
+    if not evals or len(evals.get("step", [])) == 0:
+        return None
+    hits = np.flatnonzero(np.asarray(evals["mean_return"]) >= threshold)
+    return int(evals["step"][hits[0]]) if len(hits) else None
+
+
+def report_metric(progress: dict[str, np.ndarray], epoch_steps: int, last: int = 20) -> float:
+    """The course report's score: reward collected per epoch of ``epoch_steps`` training steps, averaged over
+    the last ``last`` epochs.
+
+    It is a sum over an epoch, not a per-episode return: with 5000-step epochs on HalfCheetah (1000-step
+    episodes) it is about five episodes' worth. Computed from a progress log of finished training episodes
+    (each episode's return counted in the epoch where it ends), so the exploring policy's rewards, as in the report.
+    """
+    steps, returns = np.asarray(progress["step"]), np.asarray(progress["episode_return"])
+    end = int(steps.max()) if len(steps) else 0
+    epochs = end // epoch_steps
+    if epochs < 1:
+        raise ValueError(f"the log covers {end} steps, less than one epoch of {epoch_steps}")
+    first = max(epochs - last, 0)
+    lo, hi = first * epoch_steps, epochs * epoch_steps
+    inside = (steps > lo) & (steps <= hi)
+    return float(returns[inside].sum() / (epochs - first))
+
+
+def seeds_table(run: RunResults, threshold: float) -> list[dict[str, Any]]:
+    """Per seed: final evaluation mean return, first step reaching ``threshold``, episodes per evaluation."""
+    rows = []
+    for s in run.seeds:
+        ev = s.evals
+        rows.append({
+            "seed": s.seed,
+            "final_step": int(ev["step"][-1]) if ev else None,
+            "final_mean_return": float(ev["mean_return"][-1]) if ev else None,
+            "eval_episodes": int(ev["episodes"][-1]) if ev else None,
+            "first_step_reaching": first_step_reaching(ev, threshold),
+        })
+    return rows
+
+
+def gap_and_spread(finals: dict[str, np.ndarray]) -> tuple[str, str, float, float]:
+    """Per-seed final returns by arm -> (best arm, worst arm, gap between their means, largest std within an arm).
+
+    A gap under twice the spread is not a ranking with a handful of seeds: the chapters say so when it is.
+    """
+    means = {arm: float(np.mean(f)) for arm, f in finals.items()}
+    best, worst = max(means, key=means.get), min(means, key=means.get)
+    return best, worst, means[best] - means[worst], max(float(np.std(f)) for f in finals.values())
+
+
+def scaling_runs(record: dict[str, Any]) -> dict[tuple[int, str], dict[str, Any]]:
+    """``benchmarks/dppo_scaling.py``'s runs by (workers, way of sharing)."""
+    return {(r["workers"], r.get("share", "gradients")): r for r in record["results"]}
+
+
+def learning_seconds(run: dict[str, Any]) -> float:
+    """Seconds per update outside the rollout (minibatch steps, synchronization, checkpoint) of one scaling run."""
+    return run["update_seconds_per_update"] - run["rollout_seconds_per_update"]
+
+
+def scaling_rows(record: dict[str, Any]) -> list[dict[str, Any]]:
+    """One table row per run of ``benchmarks/dppo_scaling.py``'s record (rates in env-steps/s, times per update)."""
+    return [{"workers": r["workers"], "sharing": r.get("share", "gradients") if r["workers"] > 1 else "(nothing)",
+             "env-steps/s (training)": r["env_steps_per_second"], "ratio to 1 worker": f"{r['ratio_to_1_worker']:.2f}×",
+             "env-steps/s incl. start-up": r["env_steps_per_second_wall"],
+             "rollout s / update": f"{r['rollout_seconds_per_update']:.3f}",
+             "learning + sync s / update": f"{learning_seconds(r):.3f}"}
+            for r in record["results"]]
+
+
+def markdown_table(rows: list[dict[str, Any]], headers: dict[str, str] | None = None) -> str:
+    """A list of dicts as a Markdown table (``headers`` renames columns; None cells show as —).
+
+    Floats of 100 or more get one decimal and thousands separators, smaller ones 4 significant digits."""
+    if not rows:
+        return "_(no rows)_"
+    keys = list(headers or rows[0])
+    names = [(headers or {}).get(k, k) for k in keys]
+
+    def cell(v: Any) -> str:
+        if v is None:
+            return "—"
+        if isinstance(v, float):  # one decimal for returns and rates; small settings (3e-4, 0.99) in full
+            return f"{v:,.1f}" if abs(v) >= 100 else f"{v:.4g}"
+        return str(v)
+
+    lines = ["| " + " | ".join(names) + " |", "|" + "|".join("---" for _ in keys) + "|"]
+    lines += ["| " + " | ".join(cell(r.get(k)) for k in keys) + " |" for r in rows]
+    return "\n".join(lines)

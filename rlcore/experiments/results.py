@@ -1,0 +1,179 @@
+"""Reading what the experiments wrote: a run's seeds from ``results/`` (or a short live stand-in), their
+provenance for the page, and the status of an experiment's seeds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, get_experiment, run_paths
+from rlcore.experiments.runner import _train_all
+from rlcore.logger import read_csv
+
+
+@dataclass
+class SeedResult:
+    """One finished seed: its logs, its config and metadata, and (loaded on first use) its policy."""
+
+    seed: int
+    folder: Path
+    progress: dict[str, np.ndarray]
+    evals: dict[str, np.ndarray]
+    config: dict[str, Any]
+    meta: dict[str, Any]
+    _policy: Any = field(default=None, repr=False)
+
+    @property
+    def episode_end_steps(self) -> np.ndarray:
+        return self.progress["step"]
+
+    @property
+    def episode_returns(self) -> np.ndarray:
+        """Training episodes' returns (of the exploring behaviour policy)."""
+        return self.progress["episode_return"]
+
+    @property
+    def policy(self):
+        """The final deterministic policy, from ``policy.pt``."""
+        if self._policy is None:
+            from rlcore.algos import get_algorithm
+            from rlcore.checkpoint import load_checkpoint
+
+            ckpt = load_checkpoint(self.folder / "policy.pt")
+            self._policy = get_algorithm(ckpt["algo"]).load_policy(ckpt)
+        return self._policy
+
+
+@dataclass
+class RunResults:
+    """The seeds of one configuration: from ``results/``, or from a short live stand-in (``source="live"``)."""
+
+    spec: RunSpec
+    seeds: list[SeedResult]
+    missing: list[int]
+    source: str = "results"
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def label(self) -> str:
+        return self.spec.label or self.spec.name
+
+    @property
+    def steps(self) -> int:
+        """Training steps per seed of what is shown (the live budget for a live stand-in)."""
+        return self.spec.steps
+
+
+def _read_run(name: str, spec: RunSpec, results: Path) -> RunResults:
+    found, missing = [], []
+    for s in spec.seeds:
+        _, folder = run_paths(name, spec.name, s, results)
+        if not (folder / "policy.pt").exists():
+            missing.append(s)
+            continue
+        found.append(SeedResult(
+            s, folder, read_csv(folder / "progress.csv"),
+            read_csv(folder / "eval.csv") if (folder / "eval.csv").exists() else {},
+            json.loads((folder / "config.json").read_text()), json.loads((folder / "meta.json").read_text()),
+        ))
+    return RunResults(spec, found, missing)
+
+
+def load_experiment(name: str, results: Path = RESULTS_DIR) -> dict[str, RunResults]:
+    """Everything ``results/`` holds for an experiment, with the seeds still missing listed per run."""
+    return {spec.name: _read_run(name, spec, results) for spec in get_experiment(name).runs}
+
+
+def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list[int], jobs: int = 2,
+                  eval_points: int = 10, results: Path = RESULTS_DIR) -> RunResults:
+    """Run ``run`` of experiment ``name`` from ``results/``; if it has no seed there, a short live stand-in.
+
+    The stand-in has the same settings with ``fallback_steps`` steps per seed (evaluated ``eval_points``
+    times), trains ``fallback_seeds`` in ``jobs`` processes into a temporary folder, and is returned
+    with ``source="live"`` so that a page can say what it shows.
+    """
+    found = _read_run(name, next(r for r in get_experiment(name).runs if r.name == run), results)
+    if found.seeds:
+        return found
+    from rlcore.algos import get_algorithm
+
+    spec = found.spec
+    overrides = dict(spec.overrides)
+    if "eval_every" in get_algorithm(spec.algo).Config.__dataclass_fields__:
+        overrides["eval_every"] = max(fallback_steps // eval_points, 1)
+    live = dataclasses.replace(spec, steps=fallback_steps, seeds=tuple(fallback_seeds), overrides=overrides)
+    tmp = Path(tempfile.mkdtemp(prefix=f"rlcore-live-{name}-"))
+    _train_all(name, [(live, s) for s in live.seeds], jobs, tmp / "results", tmp / "runs", progress=False)
+    out = _read_run(name, live, tmp / "results")
+    return RunResults(live, out.seeds, list(spec.seeds), source="live")
+
+
+def provenance_markdown(name: str, run: RunResults, command: str | None = None) -> str:
+    """What to print under a figure: which seeds, how many steps, made by which command, commit, versions, in a
+    collapsed dropdown ("Provenance: <run>").
+
+    A live stand-in, or seeds still missing from ``results/``, get a visible warning.
+    """
+    command = command or f"python -m rlcore experiments run {name} --jobs 2"
+    full = next(r for r in get_experiment(name).runs if r.name == run.name)
+    folder = f"results/{name}/{run.name}/"
+    seeds = [s.seed for s in run.seeds]
+    if run.source == "live":
+        return (f":::{{warning}}\n**{run.label}**: `{folder}` holds none of its seeds {run.missing}, so this "
+                f"page trained a short live run instead: seed(s) {seeds}, {run.steps:,} steps each (the full "
+                f"budget is {full.steps:,}). Run `{command}` to fill in `results/`.\n:::\n")
+    commits = sorted({s.meta.get("commit") or "unknown" for s in run.seeds})
+    commits_text = ", ".join(c[:7] + (" (with uncommitted changes)" if c.endswith("+dirty") else "") for c in commits)
+    meta = run.seeds[0].meta if run.seeds else {}
+    v = meta.get("versions", {})
+    text = (f"*{run.label}*: `{folder}`, seeds {seeds} ({len(seeds)} of {len(full.seeds)}), {run.steps:,} steps "
+            f"each; made by `{command}` at commit {commits_text}; Gymnasium {v.get('gymnasium')}, PyTorch "
+            f"{v.get('torch')}, NumPy {v.get('numpy')}, Python {v.get('python')}, "
+            f"{meta.get('machine', {}).get('cpus', '?')} CPUs.")
+    resumes = [(s.seed, r) for s in run.seeds for r in s.meta.get("resumes", [])]
+    if resumes:
+        text += " Resumed from a checkpoint: " + "; ".join(
+            f"seed {seed} at step {r['step']:,} ({r.get('machine', {}).get('cpus', '?')} CPUs, commit "
+            f"{str(r.get('commit'))[:7]}, PyTorch {r.get('versions', {}).get('torch')})" for seed, r in resumes) + "."
+    moved = [(s.seed, s.meta["checkout_at_start"]) for s in run.seeds if s.meta.get("checkout_at_start")]
+    if moved:  # a long-lived process ran code it had loaded before the checkout moved on (see rlcore.runs)
+        text += " Trained by a process that had loaded its code earlier: " + "; ".join(
+            f"seed {seed} (the checkout was already at {str(c)[:7]})" for seed, c in moved) + "."
+    notes: dict[str, list[int]] = {}
+    for s in run.seeds:
+        if s.meta.get("provenance_note"):
+            notes.setdefault(s.meta["provenance_note"], []).append(s.seed)
+    text += "".join(f" Seed{'s' if len(seeds) > 1 else ''} {', '.join(map(str, seeds))}: {note}"
+                    for note, seeds in notes.items())
+    # the record a reader may want, folded under the figure; what a reader must see stays visible
+    text = f"::::{{dropdown}} Provenance: {run.label}\n{text}\n::::\n"
+    if run.missing:
+        text += (f"\n:::{{warning}}\nSeeds {run.missing} of *{run.label}* are not in `{folder}` yet; this page "
+                 f"shows the {len(seeds)} that are. Run `{command}` to finish them.\n:::\n")
+    return text
+
+
+def status_lines(name: str, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
+    """One line per run: seeds finished in ``results``, and how far each unfinished one has trained in ``work``."""
+    lines = []
+    for run, res in load_experiment(name, results).items():
+        have = len(res.seeds)
+        total = have + len(res.missing)
+        lines.append(f"{name}/{run}: {have}/{total} seeds" + (f" (missing {res.missing})" if res.missing else ""))
+        for seed in res.missing:
+            folder, _ = run_paths(name, run, seed, results, work)
+            progress = read_csv(folder / "progress.csv") if (folder / "progress.csv").exists() else {}
+            if (folder / "checkpoint.pt").exists() and len(progress.get("step", [])):
+                lines.append(f"  seed {seed}: trained to step {int(progress['step'][-1]):,} of {res.spec.steps:,} in "
+                             f"{folder}; `experiments run` resumes it from its last checkpoint")
+    return lines

@@ -1,0 +1,118 @@
+"""Training the named experiments: one seed at a time or one process per core, resumable, with the small
+outputs copied to ``results/`` when a seed finishes.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import shutil
+import signal
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+from typing import Any
+
+from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, _META_KEYS, get_experiment, run_paths
+
+
+def export_policy(checkpoint: str | os.PathLike, dest: str | os.PathLike) -> None:
+    """Write only what :func:`load_policy` needs from ``checkpoint`` (no replay memory, no optimizer)."""
+    from rlcore.algos import get_algorithm
+    from rlcore.checkpoint import load_checkpoint, save_checkpoint
+
+    ckpt = load_checkpoint(checkpoint)
+    keys = (*_META_KEYS, *get_algorithm(ckpt["algo"]).POLICY_KEYS)
+    save_checkpoint(dest, {k: ckpt[k] for k in keys if k in ckpt and k not in ("format", "format_version")})
+
+
+def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:
+    """Train (or resume) one seed and copy its small outputs to ``results``; returns a status line."""
+    import torch
+
+    from rlcore.algos import get_algorithm
+
+    torch.set_num_threads(1)
+    work_dir, result_dir = run_paths(exp, spec.name, seed, results, work)
+    if (result_dir / "policy.pt").exists():
+        return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
+    module = get_algorithm(spec.algo)
+    config = module.make_config(spec.algo, **spec.overrides)
+    module.train(spec.env_id, config, steps=spec.steps, seed=seed, out=work_dir, progress=False)
+    result_dir.mkdir(parents=True, exist_ok=True)
+    for name in ("config.json", "meta.json", "progress.csv", "eval.csv"):
+        if (work_dir / name).exists():
+            shutil.copy2(work_dir / name, result_dir / name)
+    export_policy(work_dir / "checkpoint.pt", result_dir / "policy.pt")
+    return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
+
+
+def _train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: Path, work: Path,
+               progress: bool = True) -> list[str]:
+    from tqdm import tqdm
+
+    lines: list[str] = []
+    with tqdm(total=len(tasks), desc=name, unit="run", disable=not progress) as bar:
+        if jobs <= 1:
+            for spec, s in tasks:
+                lines.append(train_one(name, spec, s, results, work))
+                bar.update(1)
+        else:
+            for line in run_in_pool(train_one, [(name, spec, s, results, work) for spec, s in tasks], jobs):
+                lines.append(line)
+                bar.update(1)
+    return lines
+
+
+def run_in_pool(fn: Callable[..., Any], calls: list[tuple], jobs: int):
+    """Yield ``fn(*args)`` for each of ``calls``, ``jobs`` processes at a time, as each finishes.
+
+    A call is handed to a worker only when one is free, so that when one fails, or the run is interrupted, no
+    further call starts: the error is raised once the calls already running have returned. (Submitting
+    everything at once would queue calls that a pool runs even after an interrupt.) An interrupt of this
+    process (Ctrl-C, or SIGTERM with :func:`rlcore.runs.stop_on_signals`) is passed on to the workers as SIGINT:
+    each running ``train`` saves a checkpoint and stops, instead of training on to the end of its seed.
+    """
+    from rlcore.runs import stop_on_signals
+
+    # spawn, not fork: safe from a Jupyter kernel, whose threads a fork would copy half-way
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=stop_on_signals, initargs=(True,)) as pool:
+        yield from schedule(pool, fn, calls, jobs)
+
+
+def schedule(pool: Any, fn: Callable[..., Any], calls: list[tuple], jobs: int):
+    """:func:`run_in_pool`'s rule, for any executor: at most ``jobs`` calls running, a new one submitted only when
+    one has finished, and none after a failure or an interrupt (which is passed on to the pool's workers)."""
+    todo = list(calls)
+    running = {pool.submit(fn, *todo.pop(0)) for _ in range(min(jobs, len(todo)))}
+    try:
+        while running:
+            done, running = wait(running, return_when=FIRST_COMPLETED)
+            # every call that finished is looked at before any new one starts: a failure among them raises
+            # here, nothing new is submitted, and the executor waits for the calls still running
+            results = [fut.result() for fut in done]
+            for result in results:
+                if todo:
+                    running.add(pool.submit(fn, *todo.pop(0)))
+                yield result
+    except (KeyboardInterrupt, GeneratorExit):  # interrupted, or the caller stopped asking for results
+        for child in multiprocessing.active_children():  # the pool's workers
+            os.kill(child.pid, signal.SIGINT)
+        raise
+
+
+def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
+                   results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
+    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time."""
+    exp = get_experiment(name)
+    names = [spec.name for spec in exp.runs]
+    unknown = sorted(set(only or ()) - set(names))
+    if unknown:
+        raise ValueError(f"{name} has no run {', '.join(map(repr, unknown))}; its runs: {', '.join(names)}.")
+    tasks = [(spec, s) for spec in exp.runs if not only or spec.name in only
+             for s in spec.seeds if seeds is None or s in seeds]
+    if not tasks:
+        known = sorted({s for spec in exp.runs if not only or spec.name in only for s in spec.seeds})
+        raise ValueError(f"{name} has no seed {seeds} in the runs chosen; their seeds: {known}.")
+    return _train_all(name, tasks, jobs, results, work)
