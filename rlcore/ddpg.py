@@ -231,7 +231,6 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     param_noise = AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed) if config.exploration == "param" else None
     # [ddpg-normalize]
     scaler = ObservationScaler(sp["obs_dim"]) if config.normalize_obs else None
-    obs_rms = None if scaler is None else scaler.rms
 
     def scaled(x: np.ndarray) -> torch.Tensor:
         """Observations as the networks see them: raw, or scaled by the running statistics (normalize_obs)."""
@@ -239,9 +238,9 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     # [/ddpg-normalize]
 
     def policy() -> DeterministicPolicy:
-        if obs_rms is None:
+        if scaler is None:
             return DeterministicPolicy(actor)
-        return DeterministicPolicy(actor, obs_rms.mean.copy(), obs_rms.var.copy())
+        return DeterministicPolicy(actor, scaler.rms.mean.copy(), scaler.rms.var.copy())
 
     step = episode = 0
     returns: list[float] = []
@@ -291,8 +290,8 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         for src in (noise, param_noise):
             if src is not None:
                 state["noise"] = src.state_dict()
-        if obs_rms is not None:
-            state.update(running_stats_state(obs_rms, "obs"))
+        if scaler is not None:
+            state.update(running_stats_state(scaler.rms, "obs"))
         if config.replay_in_checkpoint:
             state["replay"] = buffer.state_dict()
         save_checkpoint(run.checkpoint, state)

@@ -181,9 +181,6 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
     run resumes only with the budget it started with: another ``steps`` would bend the schedule mid-run. A run
     whose budget shapes nothing (DDPG, tabular) may be resumed with a larger budget, which extends it.
     """
-    from rlcore.config import check_budget
-
-    check_budget(steps, seed)
     if out is None:
         return None, None
     from rlcore.checkpoint import load_checkpoint
