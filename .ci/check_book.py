@@ -8,7 +8,8 @@ notebook that fails to execute. This check does not rely on that alone: it fails
 - _build/html/reports/ holds any execution report (myst-nb writes one per notebook that raised;
   the traceback is inside), or
 - a page of _toc.yml shows a GIF larger than 1.5 MB (a page should load light; rlcore.render.render_gif's
-  size, frame_skip and colors options trade length and detail for bytes).
+  size, frame_skip and colors options trade length and detail for bytes), or
+- a page of _toc.yml has more than 4,000 words of prose (.ci/prose_words.py counts them; split it into sections).
 
 Run from the repository root after the build:  python3 .ci/check_book.py
 Reports from an earlier build are not deleted by a later one: remove _build/html/reports/ before
@@ -68,6 +69,13 @@ def main() -> int:
                 if gif.is_file() and gif.stat().st_size > MAX_GIF_BYTES:
                     problems.append(f"page {page!r} shows {gif.relative_to(ROOT)}: {gif.stat().st_size / 1e6:.2f} MB, "
                                     f"over the {MAX_GIF_BYTES / 1e6:.1f} MB a GIF may take")
+        from prose_words import MAX_PROSE_WORDS, count_words
+
+        for page in toc_pages(toc):
+            source = ROOT / f"{page}.md"
+            if source.is_file() and (n := count_words(source.read_text(encoding="utf-8"))) > MAX_PROSE_WORDS:
+                problems.append(f"page {page!r} has {n:,} words of prose, over {MAX_PROSE_WORDS:,}: split it into "
+                                "sections (_toc.yml `sections:`); `python3 .ci/prose_words.py` counts them")
 
     if problems:
         print("Book check FAILED:", file=sys.stderr)
@@ -75,7 +83,7 @@ def main() -> int:
             print(f"  - {problem}", file=sys.stderr)
         return 1
     print(f"Book check passed: every page of _toc.yml is in {HTML.relative_to(ROOT)}/, no execution reports, "
-          f"no GIF over {MAX_GIF_BYTES / 1e6:.1f} MB.")
+          f"no GIF over {MAX_GIF_BYTES / 1e6:.1f} MB, no page over 4,000 words of prose.")
     return 0
 
 
