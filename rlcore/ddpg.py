@@ -22,17 +22,14 @@ import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from rlcore.buffers import ReplayBuffer
-from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
 from rlcore.config import check_budget, check_config
 from rlcore.envs import ObservationScaler, make_env, normalize_observation
-from rlcore.evaluate import evaluate_policy
-from rlcore.logger import CSVLogger
+from rlcore.harness import EPISODE_COLUMNS, Run, Saved, evaluation, running_stats, torch_rng
 from rlcore.nets import mlp, soft_update
 from rlcore.noise import AdaptiveParamNoise, GaussianNoise, OrnsteinUhlenbeckNoise
-from rlcore.runs import config_dict, episode_seed, open_run
+from rlcore.runs import episode_seed
 
 POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -200,6 +197,49 @@ class Result:
     """The final deterministic policy, with the observation statistics when normalize_obs."""
 
 
+def make_networks(sp: dict[str, Any], config: Config) -> tuple[Actor, Critic, Actor, Critic]:
+    """Actor mu, critic Q, and their targets mu', Q' as copies."""
+    actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
+    critic = Critic(sp["obs_dim"], sp["act_dim"], config.hidden)
+    return actor, critic, copy.deepcopy(actor), copy.deepcopy(critic)
+
+
+def make_exploration(config: Config, act_dim: int, seed: int) -> tuple[Any, AdaptiveParamNoise | None]:
+    """``(action noise or None, parameter noise or None)`` for ``config.exploration``."""
+    if config.exploration == "gaussian":
+        return GaussianNoise(act_dim, config.noise_sigma, config.explore_decay, seed=seed), None
+    if config.exploration == "ou":
+        return OrnsteinUhlenbeckNoise(act_dim, sigma=config.noise_sigma, seed=seed), None
+    if config.exploration == "param":
+        return None, AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed)
+    return None, None
+
+
+def noise_sigma(noise: Any, param_noise: AdaptiveParamNoise | None) -> float:
+    """The exploration's current scale (0 without noise)."""
+    return float(getattr(param_noise if param_noise is not None else noise, "sigma", 0.0))
+
+
+def exploration_state(noise: Any, param_noise: AdaptiveParamNoise | None, actor: Actor) -> Saved:
+    """The noise's generator and state in a checkpoint (``noise``), so that a resumed run continues as if never
+    stopped; a checkpoint from before rlcore saved them restores only the scale (``noise_sigma``)."""
+    source = param_noise if param_noise is not None else noise
+
+    def save() -> dict[str, Any]:
+        return {"noise_sigma": noise_sigma(noise, param_noise),
+                **({"noise": source.state_dict()} if source is not None else {})}
+
+    def load(ckpt: dict[str, Any]) -> None:
+        if "noise" in ckpt and param_noise is not None:
+            param_noise.load_state_dict(ckpt["noise"], actor)
+        elif "noise" in ckpt and noise is not None:
+            noise.load_state_dict(ckpt["noise"])
+        elif hasattr(source, "sigma"):
+            source.sigma = float(ckpt["noise_sigma"])
+
+    return Saved(save, load)
+
+
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
           out: str | Path | None = None, progress: bool = False) -> Result:
     """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint)."""
@@ -215,20 +255,12 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     # [/ddpg-env]
     eval_env = make_env(env_id, **config.env_kwargs)
     low, high = np.array(sp["low"]), np.array(sp["high"])
-    actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, low, high)
-    critic = Critic(sp["obs_dim"], sp["act_dim"], config.hidden)
-    actor_t, critic_t = copy.deepcopy(actor), copy.deepcopy(critic)
+    half = (high - low) / 2
+    actor, critic, actor_t, critic_t = make_networks(sp, config)
     actor_opt = torch.optim.Adam(actor.parameters(), lr=config.actor_lr, fused=True)
     critic_opt = torch.optim.Adam(critic.parameters(), lr=config.critic_lr, fused=True)
     buffer = ReplayBuffer(config.buffer_size, (sp["obs_dim"],), (sp["act_dim"],), np.float32, seed=seed)
-    half = (high - low) / 2
-    if config.exploration == "gaussian":
-        noise = GaussianNoise(sp["act_dim"], config.noise_sigma, config.explore_decay, seed=seed)
-    elif config.exploration == "ou":
-        noise = OrnsteinUhlenbeckNoise(sp["act_dim"], sigma=config.noise_sigma, seed=seed)
-    else:
-        noise = None
-    param_noise = AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed) if config.exploration == "param" else None
+    noise, param_noise = make_exploration(config, sp["act_dim"], seed)
     # [ddpg-normalize]
     scaler = ObservationScaler(sp["obs_dim"]) if config.normalize_obs else None
 
@@ -238,71 +270,22 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     # [/ddpg-normalize]
 
     def policy() -> DeterministicPolicy:
-        if scaler is None:
-            return DeterministicPolicy(actor)
-        return DeterministicPolicy(actor, scaler.rms.mean.copy(), scaler.rms.var.copy())
+        stats = () if scaler is None else (scaler.rms.mean.copy(), scaler.rms.var.copy())
+        return DeterministicPolicy(actor, *stats)
 
-    step = episode = 0
-    returns: list[float] = []
-    end_steps: list[int] = []
-    evals: list[tuple[int, float]] = []
-
-    run, ckpt = open_run(out, "ddpg", env_id, seed, steps, config)
-    if ckpt is not None:
-        for mod, key in ((actor, "actor"), (critic, "critic"), (actor_t, "actor_target"), (critic_t, "critic_target"),
-                         (actor_opt, "actor_opt"), (critic_opt, "critic_opt")):
-            mod.load_state_dict(ckpt[key])
-        if "replay" in ckpt:
-            buffer.load_state_dict(ckpt["replay"])
-        step, episode = int(ckpt["step"]), int(ckpt["episode"])
-        if scaler is not None:
-            load_running_stats(scaler.rms, ckpt, "obs")
-            scaler.loaded()
-        rng.bit_generator.state = ckpt["rng"]
-        torch.set_rng_state(ckpt["torch_rng"])
-        if "noise" in ckpt:  # the noise's generator and state: the run continues as if never stopped
-            if noise is not None:
-                noise.load_state_dict(ckpt["noise"])
-            if param_noise is not None:
-                param_noise.load_state_dict(ckpt["noise"], actor)
-        else:  # a checkpoint from before rlcore saved the noise: only the scale it had decayed or adapted to
-            for src in (noise, param_noise):
-                if src is not None and hasattr(src, "sigma"):
-                    src.sigma = float(ckpt["noise_sigma"])
-    log = eval_log = None
-    if run is not None:
-        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "noise_sigma"])
-        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
-
-    def noise_sigma() -> float:
-        src = param_noise if param_noise is not None else noise
-        return float(getattr(src, "sigma", 0.0))
-
-    def checkpoint() -> None:
-        if run is None:
-            return
-        state = {"algo": "ddpg", "env_id": env_id, "seed": seed, "config": config_dict(config), "step": step,
-                 "episode": episode, "total_steps": steps, "complete": step >= steps, "spaces": sp,
-                 "actor": actor.state_dict(), "critic": critic.state_dict(), "actor_target": actor_t.state_dict(),
-                 "critic_target": critic_t.state_dict(), "actor_opt": actor_opt.state_dict(),
-                 "critic_opt": critic_opt.state_dict(), "rng": rng.bit_generator.state,
-                 "torch_rng": torch.get_rng_state(), "noise_sigma": noise_sigma()}
-        for src in (noise, param_noise):
-            if src is not None:
-                state["noise"] = src.state_dict()
-        if scaler is not None:
-            state.update(running_stats_state(scaler.rms, "obs"))
-        if config.replay_in_checkpoint:
-            state["replay"] = buffer.state_dict()
-        save_checkpoint(run.checkpoint, state)
-
+    run = Run("ddpg", env_id, config, steps, seed, out, progress, desc=f"DDPG {env_id}", close=(env, eval_env),
+              evaluate=lambda: evaluation(policy(), eval_env, config.eval_episodes, seed + 10_000),
+              episode_log=EPISODE_COLUMNS + ["noise_sigma"])
+    run.track(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
+              critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
+              torch_rng=torch_rng(), noise=exploration_state(noise, param_noise, actor), spaces=sp,
+              obs=running_stats(scaler.rms, "obs", scaler.loaded) if scaler is not None else None)
+    step, episode = run.resume(step=0, episode=0)
     obs, _ = env.reset(seed=episode_seed(seed, episode))
-    behaviour = actor
-    if param_noise is not None:  # the perturbed actor a checkpoint restored, or a fresh one
+    behaviour = actor  # with parameter noise: the perturbed actor a checkpoint restored, or a fresh one
+    if param_noise is not None:
         behaviour = param_noise.perturbed if param_noise.perturbed is not None else param_noise.perturb(actor)
-    ep_return, ep_len = 0.0, 0
-    bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step", desc=f"DDPG {env_id}")
-    try:
+    with run:
         while step < steps:
             # [ddpg-act]
             # a_t = mu(s_t) + N_t
@@ -320,18 +303,11 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 scaler.update(next_obs)
             obs = next_obs
             step += 1
-            ep_len += 1
-            if terminated or truncated:
+            if terminated or truncated:  # info["episode"]: the raw return, before reward_scale
                 episode += 1
-                ep_return = float(info["episode"]["r"])  # raw reward, before reward_scale
-                returns.append(ep_return)
-                end_steps.append(step)
-                if log is not None:
-                    log.log(episode=episode, step=step, episode_return=ep_return, episode_length=ep_len,
-                            noise_sigma=noise_sigma())
-                bar.set_postfix(ret=f"{ep_return:.1f}", refresh=False)
+                run.record_episode(step, float(info["episode"]["r"]), int(info["episode"]["l"]),
+                                   noise_sigma=noise_sigma(noise, param_noise))
                 obs, _ = env.reset(seed=episode_seed(seed, episode))
-                ep_len = 0
                 if noise is not None:
                     noise.reset()
                 # [ddpg-param-noise]
@@ -351,28 +327,9 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                 soft_update(actor_t, actor, config.tau)
                 soft_update(critic_t, critic, config.tau)
             # [/ddpg-learn]
-            if config.eval_every and step % config.eval_every == 0:
-                rets = evaluate_policy(policy(), eval_env, config.eval_episodes, seed=seed + 10_000)
-                actor.train()
-                evals.append((step, float(rets.mean())))
-                if eval_log is not None:
-                    eval_log.log(step=step, mean_return=float(rets.mean()), std_return=float(rets.std()), episodes=len(rets))
-            if step % config.checkpoint_every == 0:
-                checkpoint()
-            bar.update(1)
-    except KeyboardInterrupt:
-        checkpoint()
-        raise
-    finally:
-        bar.close()
-        env.close()
-        eval_env.close()
-        for f in (log, eval_log):
-            if f is not None:
-                f.close()
-    checkpoint()
-    return Result(actor, critic, np.array(returns), np.array(end_steps, dtype=int),
-                  np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step, policy())
+            run.step_done(step, step - 1, episode=episode)
+    return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns,
+                  step, policy())
 
 
 def make_config(algo: str, **overrides: Any) -> Config:

@@ -29,12 +29,15 @@ def scaling_record():
 
 @pytest.fixture
 def interrupt_at_first_checkpoint(monkeypatch):
-    """``interrupt_at_first_checkpoint(module)``: the next ``module.train`` stops right after its first periodic
+    """``interrupt_at_first_checkpoint(module)``: the next ``module.train`` (every one runs in
+    :class:`rlcore.harness.Run`, which writes the checkpoints) stops right after its first periodic
     checkpoint with a KeyboardInterrupt, as Ctrl-C would there, so that a test can resume it with the same budget
     (a run whose budget shapes its schedules cannot be resumed with another one)."""
 
     def arm(module):
-        real = module.save_checkpoint
+        import rlcore.harness
+
+        real = rlcore.harness.save_checkpoint
         calls = []
 
         def save_then_interrupt(path, state):
@@ -43,7 +46,7 @@ def interrupt_at_first_checkpoint(monkeypatch):
             if len(calls) == 1:
                 raise KeyboardInterrupt
 
-        monkeypatch.setattr(module, "save_checkpoint", save_then_interrupt)
+        monkeypatch.setattr(rlcore.harness, "save_checkpoint", save_then_interrupt)
         return calls
 
     return arm

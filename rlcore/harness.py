@@ -1,0 +1,276 @@
+"""The training harness: everything around an algorithm's loop, written once.
+
+Every ``train`` in rlcore builds its networks from its ``Config``, hands them to a :class:`Run`, and then runs
+its loop, which reads like the algorithm box in its module's docstring. The :class:`Run` owns the rest:
+
+- the run folder (``config.json``, ``meta.json``, the CSV logs) and the check that a folder being resumed
+  holds the same run (:func:`rlcore.runs.open_run`);
+- what a checkpoint saves and a resume restores: the algorithm registers it once with :meth:`Run.track`
+  (networks, optimizers, replay memories, random generators, normalizer statistics);
+- the progress bar, the per-episode log, periodic evaluation of the deterministic policy, periodic
+  checkpoints, a checkpoint at the end, and one on Ctrl-C or SIGTERM (see :func:`rlcore.runs.stop_on_signals`).
+
+A loop tells the run where it is with :meth:`Run.record_episode` (an episode ended) and :meth:`Run.step_done`
+(the step counter moved on); the run decides what is due. A typical ``train``::
+
+    run = Run("ddpg", env_id, config, steps, seed, out, progress, evaluate=..., close=(env, eval_env))
+    run.track(actor=actor, critic=critic, actor_opt=actor_opt, rng=rng, torch_rng=torch_rng())
+    step, episode = run.resume(step=0, episode=0)
+    with run:                      # progress bar; checkpoint at the end, or on Ctrl-C
+        while step < steps:
+            ...                    # the algorithm
+            run.step_done(step, step - 1, episode=episode)
+    return Result(..., run.episode_returns, run.eval_steps, ...)
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
+from rlcore.logger import CSVLogger
+from rlcore.runs import RunDir, config_dict, open_run
+
+EPISODE_COLUMNS = ["episode", "step", "episode_return", "episode_length"]
+"""The columns of ``progress.csv`` for an algorithm that logs one row per episode (before its own ones)."""
+EVAL_COLUMNS = ["step", "mean_return", "std_return", "episodes"]
+"""The columns of ``eval.csv`` (before an algorithm's own ones)."""
+
+
+class Saved:
+    """Checkpoint state that is not one ``state_dict`` under one key: ``save()`` returns checkpoint entries,
+    ``load(ckpt)`` restores them from a checkpoint."""
+
+    def __init__(self, save: Callable[[], dict[str, Any]], load: Callable[[dict[str, Any]], None]):
+        self.save, self.load = save, load
+
+
+def torch_rng() -> Saved:
+    """torch's global random generator, under ``torch_rng``."""
+    return Saved(lambda: {"torch_rng": torch.get_rng_state()}, lambda c: torch.set_rng_state(c["torch_rng"]))
+
+
+def running_stats(rms: Any, prefix: str, loaded: Callable[[], None] | None = None) -> Saved:
+    """A Gymnasium ``RunningMeanStd`` under ``{prefix}_mean``, ``{prefix}_var``, ``{prefix}_count``; with no
+    statistics (``rms`` None), ``{prefix}_mean`` and ``{prefix}_var`` are None, as a saved policy expects.
+    ``loaded`` is called after a restore (a cache built on the statistics, say)."""
+    def save() -> dict[str, Any]:
+        return {f"{prefix}_mean": None, f"{prefix}_var": None} if rms is None else running_stats_state(rms, prefix)
+
+    def load(ckpt: dict[str, Any]) -> None:
+        if rms is not None:
+            load_running_stats(rms, ckpt, prefix)
+            if loaded is not None:
+                loaded()
+
+    return Saved(save, load)
+
+
+def crossed(every: int, now: int, before: int) -> bool:
+    """Whether a counter that went from ``before`` to ``now`` passed a multiple of ``every`` (never if 0)."""
+    return bool(every) and now // every > before // every
+
+
+class Run:
+    """One training run's folder, checkpoints, logs, progress bar and evaluations (see the module docstring).
+
+    ``algo``, ``env_id``, ``config``, ``steps``, ``seed``, ``out`` and ``progress`` are ``train``'s.
+    ``target``: the step count at which the run is complete (default ``steps``; on-policy algorithms round it up
+    to whole iterations). ``schedules``: what the budget shapes, so that a resume must keep it (see
+    :func:`rlcore.runs.open_run`). ``evaluate()`` returns one row of ``eval.csv`` (without ``step``); it runs
+    every ``config.eval_every`` steps, and at the end too with ``eval_at_end``. ``logs``: extra CSV logs, file
+    stem to columns; ``progress`` is the per-episode log unless ``episode_log`` is False. ``checkpoint_on``:
+    the counter whose multiples of ``checkpoint_every`` (default ``config.checkpoint_every``) are checkpointed.
+    ``close``: environments to close at the end. ``opened``: an already opened ``(RunDir, checkpoint)``
+    (data-parallel training opens the folder on one worker only). ``meta``: extra fields for ``meta.json``.
+    """
+
+    def __init__(self, algo: str, env_id: str, config: Any, steps: int, seed: int, out: str | os.PathLike | None = None,
+                 progress: bool = False, *, desc: str, target: int | None = None, schedules: str | None = None,
+                 evaluate: Callable[[], dict[str, float]] | None = None, eval_at_end: bool = False,
+                 episode_log: list[str] | None = EPISODE_COLUMNS, eval_log: list[str] = EVAL_COLUMNS,
+                 logs: dict[str, list[str]] | None = None, checkpoint_on: str = "step",
+                 checkpoint_every: int | None = None, checkpoint_on_interrupt: bool = True, close: tuple = (),
+                 opened: tuple[RunDir | None, dict[str, Any] | None] | None = None, meta: dict[str, Any] | None = None):
+        self.algo, self.env_id, self.config, self.steps, self.seed = algo, env_id, config, steps, seed
+        self.target = steps if target is None else target
+        self.desc, self.progress, self.evaluate, self.eval_at_end = desc, progress, evaluate, eval_at_end
+        self.eval_every = getattr(config, "eval_every", 0) if evaluate is not None else 0
+        self.checkpoint_on = checkpoint_on
+        self.checkpoint_every = config.checkpoint_every if checkpoint_every is None else checkpoint_every
+        self.checkpoint_on_interrupt = checkpoint_on_interrupt
+        self.to_close = close
+        if opened is None:
+            opened = open_run(out, algo, env_id, seed, steps, config, schedules=schedules, **(meta or {}))
+        self.folder, self.ckpt = opened
+        self.tracked: dict[str, Any] = {}
+        self.constants: dict[str, Any] = {}
+        self.counters: dict[str, Any] = {}
+        self.episode = 0
+        """Episodes ended so far, over every resume (the ``episode`` column of the per-episode log)."""
+        self.returns: list[float] = []
+        self.end_steps: list[int] = []
+        self.evals: list[dict[str, float]] = []
+        self.logs: dict[str, CSVLogger] = {}
+        self._saved_at: dict[str, Any] | None = None
+        self.bar: tqdm | None = None
+        if self.folder is not None:
+            wanted = {**({"progress": episode_log} if episode_log else {}), **(logs or {})}
+            if evaluate is not None:
+                wanted["eval"] = eval_log
+            self.logs = {name: CSVLogger(self.folder.root / f"{name}.csv", cols) for name, cols in wanted.items()}
+        self.episode_log = "progress" if episode_log else None
+
+    # --- what a checkpoint holds -----------------------------------------------------------------
+
+    def track(self, **state: Any) -> None:
+        """Register what a checkpoint saves, by checkpoint key: modules, optimizers and anything else with
+        ``state_dict``/``load_state_dict``, NumPy generators (their bit generator's state), :class:`Saved`
+        pairs (the key is only a label), and constants (saved, not restored). None is skipped."""
+        for key, value in state.items():
+            if value is None:
+                continue
+            if hasattr(value, "state_dict") or isinstance(value, (np.random.Generator, Saved)):
+                self.tracked[key] = value
+            else:
+                self.constants[key] = value
+
+    def resume(self, **counters: Any) -> Any:
+        """Restore every tracked object from the checkpoint being resumed (if any) and return the counters
+        (``step=0, episode=0``, say) as the checkpoint has them, or as given. A tracked key the checkpoint
+        lacks (a replay memory left out of it) is not restored."""
+        ckpt = self.ckpt
+        if ckpt is not None:
+            for key, value in self.tracked.items():
+                if isinstance(value, Saved):
+                    value.load(ckpt)
+                elif key not in ckpt:
+                    continue
+                elif isinstance(value, np.random.Generator):
+                    value.bit_generator.state = ckpt[key]
+                else:
+                    value.load_state_dict(ckpt[key])
+            counters = {k: type(v)(ckpt[k]) for k, v in counters.items()}
+            self.episode = int(ckpt.get("episode", 0))
+        self.counters = dict(counters)
+        values = tuple(counters.values())
+        return values[0] if len(values) == 1 else values
+
+    def state(self) -> dict[str, Any]:
+        """The checkpoint's contents now."""
+        state = {"algo": self.algo, "env_id": self.env_id, "seed": self.seed, "config": config_dict(self.config),
+                 "total_steps": self.steps, "complete": self.counters.get("step", 0) >= self.target,
+                 "episode": self.episode, **self.counters, **self.constants}
+        for key, value in self.tracked.items():
+            if isinstance(value, Saved):
+                state.update(value.save())
+            elif isinstance(value, np.random.Generator):
+                state[key] = value.bit_generator.state
+            else:
+                state[key] = value.state_dict()
+        return state
+
+    def checkpoint(self) -> None:
+        """Write ``checkpoint.pt`` (atomically) if the run has a folder."""
+        if self.folder is None:
+            return
+        save_checkpoint(self.folder.checkpoint, self.state())
+        self._saved_at = dict(self.counters)
+
+    # --- what the loop reports -------------------------------------------------------------------
+
+    def record_episode(self, step: int, episode_return: float, length: int, **columns: Any) -> None:
+        """An episode ended at ``step``: keep its return, log it (``episode`` counts from 1), show it."""
+        self.episode += 1
+        self.returns.append(float(episode_return))
+        self.end_steps.append(int(step))
+        if self.episode_log is not None:
+            self.log(self.episode_log, episode=self.episode, step=step,
+                     episode_return=episode_return, episode_length=length, **columns)
+        if self.bar is not None:
+            self.bar.set_postfix(ret=f"{np.mean(self.returns[-10:]):.1f}", refresh=False)
+
+    def log(self, name: str, **row: Any) -> None:
+        """A row of the run's ``{name}.csv`` (nothing without a run folder)."""
+        if name in self.logs:
+            self.logs[name].log(**row)
+
+    def step_done(self, step: int, before: int, **counters: Any) -> None:
+        """The loop moved from ``before`` to ``step`` environment steps (and its other counters to ``counters``):
+        evaluate if an evaluation step was passed, checkpoint if a checkpoint step was passed, move the bar."""
+        previous = self.counters.get(self.checkpoint_on, 0)
+        self.counters.update(step=step, **counters)
+        if crossed(self.eval_every, step, before) or (self.eval_at_end and self.eval_every and step >= self.target):
+            self.evaluate_now(step)
+        if self.checkpoint_on == "step":
+            previous = before
+        if crossed(self.checkpoint_every, self.counters[self.checkpoint_on], previous):
+            self.checkpoint()
+        if self.bar is not None:
+            self.bar.update(step - before)
+
+    def evaluate_now(self, step: int) -> dict[str, float]:
+        """Evaluate now: a row of ``eval.csv``; the policy's networks go back to training mode after."""
+        row = {"step": step, **self.evaluate()}
+        for value in self.tracked.values():
+            if isinstance(value, torch.nn.Module):
+                value.train()
+        self.evals.append(row)
+        self.log("eval", **row)
+        return row
+
+    # --- the run's lifetime ----------------------------------------------------------------------
+
+    def __enter__(self) -> Run:
+        start = min(self.counters.get("step", 0), self.target)
+        self.bar = tqdm(total=self.target, initial=start, disable=not self.progress, unit="step", desc=self.desc)
+        return self
+
+    def __exit__(self, kind: type | None, exc: BaseException | None, tb: Any) -> None:
+        try:
+            if kind is None or (kind is KeyboardInterrupt and self.checkpoint_on_interrupt):
+                if self._saved_at != self.counters:
+                    self.checkpoint()
+        finally:
+            if self.bar is not None:
+                self.bar.close()
+            for env in self.to_close:
+                if env is not None:
+                    env.close()
+            for log in self.logs.values():
+                log.close()
+
+    # --- what train returns ------------------------------------------------------------------------
+
+    @property
+    def episode_returns(self) -> np.ndarray:
+        return np.array(self.returns)
+
+    @property
+    def episode_end_steps(self) -> np.ndarray:
+        return np.array(self.end_steps, dtype=int)
+
+    @property
+    def eval_steps(self) -> np.ndarray:
+        return self.eval_column("step").astype(int)
+
+    @property
+    def eval_returns(self) -> np.ndarray:
+        return self.eval_column("mean_return")
+
+    def eval_column(self, name: str) -> np.ndarray:
+        return np.array([row[name] for row in self.evals])
+
+
+def evaluation(policy: Any, env: Any, episodes: int, seed: int) -> dict[str, float]:
+    """A row of ``eval.csv``: the mean and standard deviation of ``episodes`` returns of ``policy``."""
+    from rlcore.evaluate import evaluate_policy
+
+    returns = evaluate_policy(policy, env, episodes, seed=seed)
+    return {"mean_return": float(returns.mean()), "std_return": float(returns.std()), "episodes": len(returns)}
