@@ -63,7 +63,12 @@ from rlcore.experiments.results import (  # noqa: F401
 )
 from rlcore.experiments.analysis import (  # noqa: F401
     first_step_reaching,
+    reward_per_epoch,
+    covers_epochs,
     report_metric,
+    final_returns,
+    last_evals,
+    mean_std,
     seeds_table,
     gap_and_spread,
     scaling_runs,

@@ -1,5 +1,6 @@
-"""The statistics and tables the chapters quote: first step reaching a threshold, the report's own metric, the gap
-between settings and the spread across seeds, DPPO's scaling rows, Markdown tables.
+"""The statistics and tables the chapters quote: first step reaching a threshold, the report's own metric and its
+per-epoch curve, each seed's final evaluation, the gap between settings and the spread across seeds, DPPO's scaling
+rows, Markdown tables.
 """
 
 from __future__ import annotations
@@ -19,23 +20,62 @@ def first_step_reaching(evals: dict[str, np.ndarray], threshold: float) -> int |
     return int(evals["step"][hits[0]]) if len(hits) else None
 
 
+def reward_per_epoch(progress: dict[str, np.ndarray], epoch_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The course report's learning curve: the training reward collected in each complete epoch of ``epoch_steps``
+    steps, from a progress log of finished training episodes (each episode's return counted in the epoch where it
+    ends). Returns (the step at which each epoch ends, the reward of that epoch); an unfinished last epoch is left out.
+    """
+    steps, returns = np.asarray(progress.get("step", [])), np.asarray(progress.get("episode_return", []))
+    epochs = int(steps.max()) // epoch_steps if len(steps) else 0
+    ends = np.arange(1, epochs + 1) * epoch_steps
+    per_epoch = np.array([returns[(steps > end - epoch_steps) & (steps <= end)].sum() for end in ends], dtype=float)
+    return ends, per_epoch
+
+
+def covers_epochs(progress: dict[str, np.ndarray], epoch_steps: int, epochs: int = 1) -> bool:
+    """Whether a progress log reaches the end of ``epochs`` epochs of ``epoch_steps`` steps (a short live stand-in
+    may not reach one: then it has no report metric)."""
+    steps = np.asarray(progress.get("step", []) if progress else [])
+    return bool(len(steps)) and int(steps.max()) >= epochs * epoch_steps
+
+
 def report_metric(progress: dict[str, np.ndarray], epoch_steps: int, last: int = 20) -> float:
     """The course report's score: reward collected per epoch of ``epoch_steps`` training steps, averaged over
-    the last ``last`` epochs.
+    the last ``last`` epochs (the mean of :func:`reward_per_epoch`'s last ``last`` values).
 
     It is a sum over an epoch, not a per-episode return: with 5000-step epochs on HalfCheetah (1000-step
     episodes) it is about five episodes' worth. Computed from a progress log of finished training episodes
     (each episode's return counted in the epoch where it ends), so the exploring policy's rewards, as in the report.
     """
-    steps, returns = np.asarray(progress["step"]), np.asarray(progress["episode_return"])
-    end = int(steps.max()) if len(steps) else 0
-    epochs = end // epoch_steps
-    if epochs < 1:
+    _, per_epoch = reward_per_epoch(progress, epoch_steps)
+    if len(per_epoch) == 0:
+        end = int(np.max(progress["step"])) if len(progress.get("step", [])) else 0
         raise ValueError(f"the log covers {end} steps, less than one epoch of {epoch_steps}")
-    first = max(epochs - last, 0)
-    lo, hi = first * epoch_steps, epochs * epoch_steps
-    inside = (steps > lo) & (steps <= hi)
-    return float(returns[inside].sum() / (epochs - first))
+    return float(per_epoch[-last:].mean())
+
+
+def final_returns(run: RunResults) -> np.ndarray:
+    """Each seed's return of the deterministic policy at its final evaluation (the mean of that evaluation's
+    episodes), in the order of ``run.seeds``."""
+    return np.array([float(s.evals["mean_return"][-1]) for s in run.seeds])
+
+
+def last_evals(evals: dict[str, np.ndarray], k: int = 5) -> float:
+    """The mean of a seed's last ``k`` evaluations (each the mean of its episodes): a final number that one lucky
+    or unlucky evaluation moves less than the last evaluation alone."""
+    if k < 1 or len(evals.get("mean_return", [])) == 0:
+        raise ValueError(f"need k >= 1 and at least one evaluation, got k={k}")
+    return float(np.mean(np.asarray(evals["mean_return"])[-k:]))
+
+
+def mean_std(values, digits: int = 0) -> str:
+    """Per-seed values as table text: "mean ± std" over seeds (the population std), one value as itself, none as —."""
+    values = np.asarray(values, dtype=float)
+    if len(values) == 0:
+        return "—"
+    if len(values) == 1:
+        return f"{values[0]:,.{digits}f}"
+    return f"{values.mean():,.{digits}f} ± {values.std():,.{digits}f}"
 
 
 def seeds_table(run: RunResults, threshold: float) -> list[dict[str, Any]]:
