@@ -27,16 +27,14 @@ import gymnasium as gym
 import numpy as np
 import torch
 import torch.nn.functional as F
-from tqdm import tqdm
 
 from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
-from rlcore.checkpoint import save_checkpoint
 from rlcore.config import NON_NEGATIVE, check_budget, check_config
 from rlcore.envs import make_env
 from rlcore.evaluate import discounted_return, episode_rewards
-from rlcore.logger import CSVLogger
+from rlcore.harness import EPISODE_COLUMNS, EVAL_COLUMNS, Run, torch_rng
 from rlcore.nets import DuelingQNetwork, QNetwork, soft_update
-from rlcore.runs import config_dict, episode_seed, open_run
+from rlcore.runs import episode_seed
 from rlcore.schedules import linear_schedule
 
 
@@ -244,6 +242,13 @@ def update(q: torch.nn.Module, q_target: torch.nn.Module, optimizer: torch.optim
     return float(loss.item()), (y - q_sa).detach().numpy()
 
 
+def make_buffer(config: Config, obs_dim: int, seed: int) -> ReplayBuffer:
+    """The replay memory D: uniform, or prioritized with exponent alpha."""
+    if config.prioritized:
+        return PrioritizedReplayBuffer(config.buffer_size, (obs_dim,), seed=seed, alpha=config.per_alpha)
+    return ReplayBuffer(config.buffer_size, (obs_dim,), seed=seed)
+
+
 def train(
     env_id: str,
     config: Config | None = None,
@@ -263,50 +268,21 @@ def train(
     q_target = copy.deepcopy(q)
     # fused: one kernel for the whole Adam step instead of a handful per parameter tensor
     optimizer = torch.optim.Adam(q.parameters(), lr=config.learning_rate, fused=True)
-    buffer_cls = PrioritizedReplayBuffer if config.prioritized else ReplayBuffer
-    kwargs = {"alpha": config.per_alpha} if config.prioritized else {}
-    buffer = buffer_cls(config.buffer_size, (obs_dim,), seed=seed, **kwargs)
+    buffer = make_buffer(config, obs_dim, seed)
     rng = np.random.default_rng(seed)
-    step = episode = 0
-    returns: list[float] = []
-    end_steps: list[int] = []
-    evals: list[dict[str, float]] = []
-
-    run, ckpt = open_run(out, "dqn", env_id, seed, steps, config, variant=config.variant,
-                         schedules="epsilon schedule" + (" and PER's beta" if config.prioritized else ""))
-    if ckpt is not None:
-        q.load_state_dict(ckpt["q"])
-        q_target.load_state_dict(ckpt["q_target"])
-        optimizer.load_state_dict(ckpt["optimizer"])
-        if "replay" in ckpt:
-            buffer.load_state_dict(ckpt["replay"])
-        step, episode = int(ckpt["step"]), int(ckpt["episode"])
-        rng.bit_generator.state = ckpt["rng"]
-        torch.set_rng_state(ckpt["torch_rng"])
-    log = eval_log = None
-    if run is not None:
-        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "epsilon"])
-        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes", "q_start",
-                                                     "discounted_return_start"])
-
-    def checkpoint() -> None:
-        if run is None:
-            return
-        state = {"algo": "dqn", "env_id": env_id, "seed": seed, "config": config_dict(config),
-                 "step": step, "episode": episode, "total_steps": steps, "complete": step >= steps,
-                 "q": q.state_dict(), "q_target": q_target.state_dict(), "optimizer": optimizer.state_dict(),
-                 "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
-        if config.replay_in_checkpoint:
-            state["replay"] = buffer.state_dict()
-        save_checkpoint(run.checkpoint, state)
-
+    run = Run("dqn", env_id, config, steps, seed, out, progress, desc=f"{config.variant} {env_id}",
+              schedules="epsilon schedule" + (" and PER's beta" if config.prioritized else ""),
+              meta={"variant": config.variant}, close=(env, eval_env),
+              evaluate=lambda: evaluate_q(q, eval_env, config.eval_episodes, seed + 10_000, config.gamma),
+              episode_log=EPISODE_COLUMNS + ["epsilon"], eval_log=EVAL_COLUMNS + ["q_start", "discounted_return_start"])
+    run.track(q=q, q_target=q_target, optimizer=optimizer, replay=buffer if config.replay_in_checkpoint else None,
+              rng=rng, torch_rng=torch_rng())
+    step, episode = run.resume(step=0, episode=0)
     # [dqn-schedule]
     decay_steps = int(config.exploration_fraction * steps)
     # [/dqn-schedule]
     obs, _ = env.reset(seed=episode_seed(seed, episode))
-    ep_return, ep_len = 0.0, 0
-    bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step", desc=f"{config.variant} {env_id}")
-    try:
+    with run:
         while step < steps:
             # [dqn-act]
             epsilon = linear_schedule(config.epsilon_start, config.epsilon_end, decay_steps, step)
@@ -316,22 +292,15 @@ def train(
                 action = greedy_action(q, obs)
             # [/dqn-act]
             # [dqn-store]
-            next_obs, reward, terminated, truncated, _ = env.step(action)
+            next_obs, reward, terminated, truncated, info = env.step(action)
             buffer.add(obs, action, reward, next_obs, terminated)
             # [/dqn-store]
             obs = next_obs
             step += 1
-            ep_return += float(reward)
-            ep_len += 1
             if terminated or truncated:
                 episode += 1
-                returns.append(ep_return)
-                end_steps.append(step)
-                if log is not None:
-                    log.log(episode=episode, step=step, episode_return=ep_return, episode_length=ep_len, epsilon=epsilon)
-                bar.set_postfix(ret=f"{ep_return:.1f}", eps=f"{epsilon:.2f}", refresh=False)
+                run.record_episode(step, float(info["episode"]["r"]), int(info["episode"]["l"]), epsilon=epsilon)
                 obs, _ = env.reset(seed=episode_seed(seed, episode))
-                ep_return, ep_len = 0.0, 0
 
             # [dqn-learn]
             if step >= config.learning_starts and step % config.train_freq == 0:
@@ -344,27 +313,9 @@ def train(
             if step % config.target_update_interval == 0:
                 soft_update(q_target, q, config.tau)
             # [/dqn-learn]
-            if config.eval_every and step % config.eval_every == 0:
-                evals.append({"step": step, **evaluate_q(q, eval_env, config.eval_episodes, seed + 10_000, config.gamma)})
-                if eval_log is not None:
-                    eval_log.log(**evals[-1])
-            if step % config.checkpoint_every == 0:
-                checkpoint()
-            bar.update(1)
-    except KeyboardInterrupt:
-        checkpoint()
-        raise
-    finally:
-        bar.close()
-        env.close()
-        eval_env.close()
-        for f in (log, eval_log):
-            if f is not None:
-                f.close()
-    checkpoint()
-    col = lambda k: np.array([e[k] for e in evals])  # noqa: E731
-    return Result(q, np.array(returns), np.array(end_steps, dtype=int), col("step").astype(int), col("mean_return"),
-                  col("q_start"), col("discounted_return_start"), step)
+            run.step_done(step, step - 1, episode=episode)
+    return Result(q, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns,
+                  run.eval_column("q_start"), run.eval_column("discounted_return_start"), step)
 
 
 # --- what the command line needs ----------------------------------------------------------------

@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -152,3 +153,60 @@ def env_dt(env_id: str, env_kwargs: dict[str, Any] | None = None) -> float:
 def simulated_seconds(env_id: str, frames: int, frame_skip: int = 1, env_kwargs: dict[str, Any] | None = None) -> float:
     """How many seconds of simulation a GIF of ``frames`` frames, one every ``frame_skip`` steps, shows."""
     return frames * frame_skip * env_dt(env_id, env_kwargs)
+
+
+@dataclass(frozen=True)
+class Clip:
+    """A GIF of a rollout that plays in real time, with what it shows (for its caption and its checks)."""
+
+    gif: bytes
+    env_id: str
+    frames: int
+    frame_skip: int
+    """Environment steps per frame."""
+    step_seconds: float
+    """Simulated seconds per environment step (:func:`env_dt`)."""
+
+    @property
+    def fps(self) -> float:
+        """Frames per second that make the clip play in real time."""
+        return 1.0 / (self.frame_skip * self.step_seconds)
+
+    @property
+    def seconds(self) -> float:
+        """Seconds of simulation the clip shows (:func:`simulated_seconds`)."""
+        return self.frames * self.frame_skip * self.step_seconds
+
+    def caption(self) -> str:
+        """E.g. "6 s of simulation in real time: 120 frames at 20 per second, one every step of 0.05 s (0.83 MB)"."""
+        every = f"{self.frame_skip} steps" if self.frame_skip > 1 else "step"
+        return (f"{self.seconds:.3g} s of simulation in real time: {self.frames} frames at {self.fps:.3g} per "
+                f"second, one every {every} of {self.step_seconds:g} s ({len(self.gif) / 1e6:.2f} MB)")
+
+
+def realtime_gif(
+    env_id: str,
+    policy: Policy | None = None,
+    seconds: float = 5.0,
+    fps: float = 25.0,
+    seed: int = 0,
+    width: int = 320,
+    height: int = 240,
+    env_kwargs: dict[str, Any] | None = None,
+    colors: int = 256,
+) -> Clip:
+    """About ``seconds`` of simulation of ``policy`` in ``env_id`` as a GIF that plays in real time.
+
+    A frame is kept every ``frame_skip = round(1 / (fps * dt))`` steps (at least 1), so that the GIF runs at
+    close to ``fps`` frames per second, and each frame is shown for exactly the simulated time it stands for,
+    ``frame_skip * dt``. The clip is as many whole frames as come closest to ``seconds``; ``Clip.seconds``
+    says exactly how long it is. The rest is :func:`render_gif`.
+    """
+    if seconds <= 0 or fps <= 0:
+        raise ValueError(f"seconds and fps must be positive, got {seconds} and {fps}")
+    dt = env_dt(env_id, env_kwargs)
+    frame_skip = max(1, round(1 / (fps * dt)))
+    frames = max(1, round(seconds / (frame_skip * dt)))
+    gif = render_gif(env_id, policy, max_frames=frames, seed=seed, fps=1 / (frame_skip * dt), width=width,
+                     height=height, env_kwargs=env_kwargs, frame_skip=frame_skip, colors=colors)
+    return Clip(gif, env_id, frames, frame_skip, dt)

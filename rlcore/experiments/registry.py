@@ -42,6 +42,8 @@ class RunSpec:
     """Config fields that differ from the algorithm's defaults."""
     label: str | None = None
     """A longer legend label (default: ``name``)."""
+    workers: int = 1
+    """Worker processes of a distributed algorithm (``dppo``), started by torchrun; 1 for every other algorithm."""
 
 
 @dataclass(frozen=True)
@@ -309,6 +311,18 @@ def _ppo_report_halfcheetah() -> Experiment:
     )
 
 
+def _dppo_halfcheetah() -> Experiment:
+    # Chapter 7's own command, `torchrun --nproc_per_node 2 -m rlcore.dppo --env HalfCheetah-v5 --steps 1000000`:
+    # two workers, PPO's defaults (the PPO paper's MuJoCo settings) per worker, gradients shared by DDP. The
+    # deterministic policy is evaluated every 50k steps instead of 10k: rank 0 evaluates while rank 1 waits.
+    return Experiment(
+        "dppo-halfcheetah",
+        "Distributed PPO on HalfCheetah-v5 with 2 workers (torchrun), rlcore.ppo.Config's defaults, 1M steps, 1 seed",
+        (RunSpec("two-workers", "dppo", "HalfCheetah-v5", 1_000_000, (0,), {"eval_every": 50_000},
+                 "DPPO on HalfCheetah-v5, 2 workers, 1M steps", workers=2),),
+    )
+
+
 EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "dqn-cartpole": _dqn_cartpole,
     "dqn-lunarlander": _dqn_lunarlander,
@@ -320,6 +334,7 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "ddpg-modern-1m": _ddpg_modern_1m,
     "ppo-report-hopper": _ppo_report_hopper,
     "ppo-report-halfcheetah": _ppo_report_halfcheetah,
+    "dppo-halfcheetah": _dppo_halfcheetah,
 }
 
 

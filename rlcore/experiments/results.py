@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, get_experiment, run_paths
-from rlcore.experiments.runner import _train_all
+from rlcore.experiments.runner import _train_all, config_class
 from rlcore.logger import read_csv
 
 
@@ -105,11 +105,9 @@ def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list
     found = _read_run(name, next(r for r in get_experiment(name).runs if r.name == run), results)
     if found.seeds:
         return found
-    from rlcore.algos import get_algorithm
-
     spec = found.spec
     overrides = dict(spec.overrides)
-    if "eval_every" in get_algorithm(spec.algo).Config.__dataclass_fields__:
+    if "eval_every" in config_class(spec.algo).__dataclass_fields__:
         overrides["eval_every"] = max(fallback_steps // eval_points, 1)
     live = dataclasses.replace(spec, steps=fallback_steps, seeds=tuple(fallback_seeds), overrides=overrides)
     tmp = Path(tempfile.mkdtemp(prefix=f"rlcore-live-{name}-"))

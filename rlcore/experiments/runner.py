@@ -4,10 +4,13 @@ outputs copied to ``results/`` when a seed finishes.
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import shutil
 import signal
+import subprocess
+import sys
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -26,6 +29,38 @@ def export_policy(checkpoint: str | os.PathLike, dest: str | os.PathLike) -> Non
     save_checkpoint(dest, {k: ckpt[k] for k in keys if k in ckpt and k not in ("format", "format_version")})
 
 
+def config_class(algo: str) -> type:
+    """The Config dataclass of ``algo``: the command line's algorithms, and ``dppo`` (started by torchrun)."""
+    if algo == "dppo":
+        from rlcore.dppo import Config
+
+        return Config
+    from rlcore.algos import get_algorithm
+
+    return get_algorithm(algo).Config
+
+
+def _set_value(value: Any) -> str:
+    """A Config value as ``--set key=VALUE`` text that :func:`rlcore.cli.parse_value` reads back unchanged."""
+    if isinstance(value, str):
+        return value
+    return json.dumps(list(value) if isinstance(value, tuple) else value)
+
+
+def distributed_command(spec: RunSpec, seed: int, out: str | os.PathLike) -> list[str]:
+    """The torchrun command line that trains one seed of a ``dppo`` spec with ``spec.workers`` workers in ``out``.
+
+    ``python -m torch.distributed.run`` is ``torchrun``; ``--standalone`` picks a free port, so that several runs
+    can train side by side. Running it again resumes from the run's checkpoint, as every ``train`` does.
+    """
+    if spec.algo != "dppo":
+        raise ValueError(f"{spec.name}: only dppo runs are started by torchrun, not {spec.algo!r}")
+    sets = [arg for key, value in spec.overrides.items() for arg in ("--set", f"{key}={_set_value(value)}")]
+    return [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc_per_node={spec.workers}",
+            "-m", "rlcore.dppo", "--env", spec.env_id, "--steps", str(spec.steps), "--seed", str(seed),
+            "--out", str(out), "--no-progress", *sets]
+
+
 def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:
     """Train (or resume) one seed and copy its small outputs to ``results``; returns a status line."""
     import torch
@@ -36,9 +71,13 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, w
     work_dir, result_dir = run_paths(exp, spec.name, seed, results, work)
     if (result_dir / "policy.pt").exists():
         return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
-    module = get_algorithm(spec.algo)
-    config = module.make_config(spec.algo, **spec.overrides)
-    module.train(spec.env_id, config, steps=spec.steps, seed=seed, out=work_dir, progress=False)
+    if spec.algo == "dppo":  # one process per worker, started by torchrun; each worker with one torch thread
+        subprocess.run(distributed_command(spec, seed, work_dir), check=True,
+                       env={**os.environ, "OMP_NUM_THREADS": "1"})
+    else:
+        module = get_algorithm(spec.algo)
+        config = module.make_config(spec.algo, **spec.overrides)
+        module.train(spec.env_id, config, steps=spec.steps, seed=seed, out=work_dir, progress=False)
     result_dir.mkdir(parents=True, exist_ok=True)
     for name in ("config.json", "meta.json", "progress.csv", "eval.csv"):
         if (work_dir / name).exists():
