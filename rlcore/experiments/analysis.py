@@ -1,10 +1,12 @@
 """The statistics and tables the chapters quote: first step reaching a threshold, the report's own metric and its
-per-epoch curve, each seed's final evaluation, the gap between settings and the spread across seeds, DPPO's scaling
-rows, Markdown tables.
+per-epoch curve, each seed's final evaluation, the gap between settings and the spread across seeds, the interquartile
+mean of a few seeds with its stratified-bootstrap interval (through rliable), DPPO's scaling rows, Markdown tables.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -101,6 +103,79 @@ def gap_and_spread(finals: dict[str, np.ndarray]) -> tuple[str, str, float, floa
     means = {arm: float(np.mean(f)) for arm, f in finals.items()}
     best, worst = max(means, key=means.get), min(means, key=means.get)
     return best, worst, means[best] - means[worst], max(float(np.std(f)) for f in finals.values())
+
+
+def eval_curves(run: RunResults, key: str = "mean_return") -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per seed, ``(evaluation steps, evals[key])``: what :func:`rlcore.plots.plot_learning_curves` draws."""
+    return [(s.evals["step"], s.evals[key]) for s in run.seeds]
+
+
+def second_half_means(run: RunResults, key: str = "mean_return") -> np.ndarray:
+    """Per seed, the mean of ``evals[key]`` over the evaluations from the middle of the run's budget on.
+
+    One score per seed that does not hang on the last evaluation alone (a DQN policy can score 500 at one
+    evaluation and 100 at the next)."""
+    return np.array([s.evals[key][s.evals["step"] >= run.steps // 2].mean() for s in run.seeds])
+
+
+# [iqm-ci]
+def _runs_by_tasks(scores: Any) -> np.ndarray:
+    """Scores as rliable wants them: shape (runs, tasks); one task if ``scores`` is one score per run."""
+    a = np.asarray(scores, dtype=float)
+    a = a[:, None] if a.ndim == 1 else a
+    if a.ndim != 2 or a.shape[0] == 0 or a.shape[1] == 0:
+        raise ValueError(f"scores must be one per run, or runs x tasks; got shape {np.shape(scores)}")
+    return a
+
+
+@contextmanager
+def _global_numpy_seed(seed: int):
+    """rliable's resampling draws from NumPy's global random state (``np.random.choice``), whatever
+    ``random_state`` it is given: seed it for the call, then put the caller's state back."""
+    state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
+
+
+def iqm_ci(scores_by_arm: Mapping[str, Any], reps: int = 2000, seed: int = 0,
+           confidence: float = 0.95) -> dict[str, tuple[float, float, float]]:
+    """Interquartile mean (IQM) of each arm's scores, with a stratified-bootstrap confidence interval.
+
+    ``scores_by_arm[arm]`` holds one score per run (seed), or an array of runs x tasks. The IQM is the mean of
+    the middle 50 % of all the arm's scores (a 25 % trimmed mean). The interval is rliable's percentile
+    interval over ``reps`` resamples, each drawing runs with replacement *within each task*
+    (Agarwal et al., 2021); with one task that is the ordinary bootstrap over seeds. Returns
+    ``{arm: (iqm, low, high)}``; the same ``seed`` gives the same interval.
+    """
+    from rliable import library as rly
+    from rliable import metrics
+
+    scores = {arm: _runs_by_tasks(v) for arm, v in scores_by_arm.items()}
+    with _global_numpy_seed(seed):
+        point, interval = rly.get_interval_estimates(
+            scores, lambda x: np.array([metrics.aggregate_iqm(x)]), reps=reps,
+            confidence_interval_size=confidence)
+    return {arm: (float(point[arm][0]), float(interval[arm][0, 0]), float(interval[arm][1, 0])) for arm in scores}
+
+
+def iqm_difference_ci(scores: Any, baseline: Any, reps: int = 2000, seed: int = 0,
+                      confidence: float = 0.95) -> tuple[float, float, float]:
+    """IQM(scores) - IQM(baseline), with a stratified-bootstrap interval that resamples the runs of the two
+    arms independently (they are separate training runs). Returns ``(difference, low, high)``: an interval
+    that contains 0 means these seeds cannot tell the two arms apart."""
+    from rliable import library as rly
+    from rliable import metrics
+
+    pair = [_runs_by_tasks(scores), _runs_by_tasks(baseline)]
+    with _global_numpy_seed(seed):
+        point, interval = rly.get_interval_estimates(
+            {"difference": pair}, lambda x, y: np.array([metrics.aggregate_iqm(x) - metrics.aggregate_iqm(y)]),
+            reps=reps, confidence_interval_size=confidence)
+    return float(point["difference"][0]), float(interval["difference"][0, 0]), float(interval["difference"][1, 0])
+# [/iqm-ci]
 
 
 def scaling_runs(record: dict[str, Any]) -> dict[tuple[int, str], dict[str, Any]]:
