@@ -1,0 +1,104 @@
+"""An experiment as a chapter page shows it: each run loaded once, from ``results/`` or from a short live
+stand-in, with a legend label that says which, the provenance to print under a figure, and a check that what
+``results/`` holds is what the experiment's registry entry claims.
+
+    runs = PageRuns("dqn-cartpole", fallback_steps=20_000, fallback_seeds=[0, 1])
+    dqn = runs["dqn"]                  # every seed results/ has, or a live stand-in if it has none
+    runs.legend(dqn), runs.describe(dqn)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from rlcore.experiments.registry import RunSpec, get_experiment
+from rlcore.experiments.results import RunResults, load_experiment, load_or_train, provenance_markdown
+
+
+@dataclass
+class PageRuns:
+    """The runs of experiment ``name`` for one page.
+
+    ``runs[run]`` loads run ``run`` on first use: every seed that ``results/`` holds, or, if it holds none, a
+    short live stand-in of ``fallback_steps`` steps for each of ``fallback_seeds``, evaluated ``eval_points``
+    times (see :func:`rlcore.experiments.load_or_train`). ``labels`` gives short legend labels by run name
+    (default: the registry's label).
+    """
+
+    name: str
+    fallback_steps: int
+    fallback_seeds: list[int]
+    eval_points: int = 10
+    labels: dict[str, str] = field(default_factory=dict)
+    _loaded: dict[str, RunResults] = field(default_factory=dict, repr=False)
+
+    @property
+    def command(self) -> str:
+        """The command that makes the experiment's full-budget runs."""
+        return f"python -m rlcore experiments run {self.name} --jobs 2"
+
+    @property
+    def specs(self) -> dict[str, RunSpec]:
+        return {spec.name: spec for spec in get_experiment(self.name).runs}
+
+    def __getitem__(self, run: str) -> RunResults:
+        if run not in self._loaded:
+            self._loaded[run] = load_or_train(self.name, run, self.fallback_steps, self.fallback_seeds,
+                                              eval_points=self.eval_points)
+        return self._loaded[run]
+
+    def legend(self, run: RunResults) -> str:
+        """A short label for legends and tables; it says when the run is a short live stand-in."""
+        label = self.labels.get(run.name, run.label)
+        return label + ("" if run.source == "results" else " (short live run)")
+
+    def describe(self, *runs: RunResults) -> str:
+        """What to show under a figure of ``runs``: their provenance, folded (see
+        :func:`rlcore.experiments.provenance_markdown`); a live stand-in or missing seeds stay visible."""
+        return "\n".join(provenance_markdown(self.name, run, self.command) for run in runs)
+
+    def complete(self, *runs: str) -> bool:
+        """Whether every named run comes from ``results/`` with all of its registry's seeds: the condition under
+        which a page's prose, written about the full-budget runs, can be checked."""
+        return all(self[r].source == "results" and not self[r].missing for r in runs)
+
+
+# [check-results]
+def check_results(name: str, results: dict[str, RunResults] | None = None) -> None:
+    """Raise ``ValueError`` unless every seed in ``results/`` for experiment ``name`` is what the registry says:
+    one of its seeds, its environment, its budget (and finished: the last evaluation is at the last step), the
+    registry's overrides of the algorithm's defaults, and every evaluation of the configured number of episodes."""
+    results = load_experiment(name) if results is None else results
+    for spec in get_experiment(name).runs:
+        run = results[spec.name]
+        if sorted([s.seed for s in run.seeds] + run.missing) != sorted(spec.seeds):
+            raise ValueError(f"{name}/{spec.name}: seeds {[s.seed for s in run.seeds]} + missing {run.missing} "
+                             f"are not the registry's {list(spec.seeds)}")
+        for s in run.seeds:
+            where = f"{name}/{spec.name}/seed-{s.seed}"
+            config = s.config.get("config", {})
+            found = {"seed": (s.config.get("seed"), s.meta.get("seed")), "env_id": s.config.get("env_id"),
+                     "steps": s.config.get("steps")}
+            wanted = {"seed": (s.seed, s.seed), "env_id": spec.env_id, "steps": spec.steps}
+            for key, value in spec.overrides.items():
+                found[key], wanted[key] = config.get(key), _as_json(value)
+            wrong = {k: (found[k], wanted[k]) for k in wanted if found[k] != wanted[k]}
+            if wrong:
+                raise ValueError(f"{where}: (found, registry) differ: {wrong}")
+            if s.evals and int(s.evals["step"][-1]) != spec.steps:
+                raise ValueError(f"{where}: the last evaluation is at step {int(s.evals['step'][-1])}, "
+                                 f"not {spec.steps}: the run did not finish")
+            if s.evals and "eval_episodes" in config and any(int(e) != config["eval_episodes"]
+                                                             for e in s.evals["episodes"]):
+                raise ValueError(f"{where}: an evaluation has other than {config['eval_episodes']} episodes")
+# [/check-results]
+
+
+def _as_json(value: Any) -> Any:
+    """A registry value as config.json stores it (tuples become lists)."""
+    if isinstance(value, (tuple, list)):
+        return [_as_json(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _as_json(v) for k, v in value.items()}
+    return value

@@ -1,0 +1,82 @@
+"""rlcore.experiments.pages: an experiment's runs as a chapter page loads, labels and describes them, and the check
+that results/ holds what the registry says."""
+
+import numpy as np
+import pytest
+
+from rlcore import experiments as ex
+from rlcore.experiments import pages
+from rlcore.experiments.pages import PageRuns, check_results
+
+SPECS = (ex.RunSpec("base", "dqn", "CartPole-v1", 100, (0, 1), {}, "Baseline"),
+         ex.RunSpec("wide", "dqn", "CartPole-v1", 100, (0, 1), {"hidden": (8, 8), "double": True}, "Wide"))
+
+
+@pytest.fixture
+def small(monkeypatch):
+    monkeypatch.setitem(ex.EXPERIMENTS, "small", lambda: ex.Experiment("small", "a test experiment", SPECS))
+
+
+def _seed(spec, seed, **changes):
+    config = {"seed": seed, "env_id": spec.env_id, "steps": spec.steps,
+              "config": {"eval_episodes": 5, **{k: list(v) if isinstance(v, tuple) else v
+                                                for k, v in spec.overrides.items()}}}
+    config.update({k: v for k, v in changes.items() if k in ("env_id", "steps")})
+    config["config"].update(changes.get("config", {}))
+    evals = {"step": np.array([50, changes.get("last_step", spec.steps)]), "episodes": np.array([5, 5]),
+             "mean_return": np.array([10.0, 20.0])}
+    return ex.SeedResult(seed, None, {}, evals, config, {"seed": seed})
+
+
+def _results(**changes):
+    return {spec.name: ex.RunResults(spec, [_seed(spec, s, **(changes if spec.name == "wide" and s == 1 else {}))
+                                            for s in spec.seeds], []) for spec in SPECS}
+
+
+def test_check_results_accepts_what_the_registry_says(small):
+    check_results("small", _results())
+    fewer = _results()
+    fewer["base"] = ex.RunResults(SPECS[0], fewer["base"].seeds[:1], [1])    # a seed still missing is fine
+    check_results("small", fewer)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"steps": 50}, "steps"),
+    ({"env_id": "Acrobot-v1"}, "env_id"),
+    ({"config": {"double": False}}, "double"),
+    ({"config": {"hidden": [8, 16]}}, "hidden"),
+    ({"last_step": 60}, "did not finish"),
+    ({"config": {"eval_episodes": 3}}, "other than 3 episodes"),
+])
+def test_check_results_refuses_a_seed_that_differs_from_the_registry(small, changes, message):
+    with pytest.raises(ValueError, match=message):
+        check_results("small", _results(**changes))
+
+
+def test_check_results_refuses_seeds_the_registry_does_not_have(small):
+    odd = _results()
+    odd["base"] = ex.RunResults(SPECS[0], odd["base"].seeds + [_seed(SPECS[0], 7)], [])
+    with pytest.raises(ValueError, match="registry's"):
+        check_results("small", odd)
+
+
+def test_page_runs_loads_each_run_once_and_says_where_it_comes_from(small, monkeypatch):
+    calls = []
+
+    def fake_load_or_train(name, run, fallback_steps, fallback_seeds, eval_points=10):
+        calls.append((name, run, fallback_steps, tuple(fallback_seeds), eval_points))
+        spec = next(s for s in SPECS if s.name == run)
+        if run == "base":
+            return ex.RunResults(spec, [_seed(spec, 0)], [1])
+        return ex.RunResults(spec, [_seed(spec, 5)], list(spec.seeds), source="live")
+
+    monkeypatch.setattr(pages, "load_or_train", fake_load_or_train)
+    runs = PageRuns("small", fallback_steps=40, fallback_seeds=[5], eval_points=2, labels={"base": "B"})
+    assert runs["base"] is runs["base"] and calls == [("small", "base", 40, (5,), 2)]   # loaded once
+    assert runs.legend(runs["base"]) == "B" and runs.legend(runs["wide"]) == "Wide (short live run)"
+    assert runs.command == "python -m rlcore experiments run small --jobs 2" and set(runs.specs) == {"base", "wide"}
+    assert not runs.complete("base") and not runs.complete("wide")     # a seed missing; a live stand-in
+    runs._loaded["base"] = _results()["base"]
+    assert runs.complete("base") and not runs.complete("base", "wide")  # every seed, from results/
+    text = runs.describe(runs["wide"])
+    assert "{warning}" in text and "short live run" in text and runs.command in text
