@@ -184,6 +184,22 @@ class Clip:
                 f"second, one every {every} of {self.step_seconds:g} s ({len(self.gif) / 1e6:.2f} MB)")
 
 
+def realtime_frame_skip(dt: float, fps: float = 25.0) -> int:
+    """Environment steps per frame for a GIF of a task with ``dt`` seconds a step that plays in real time at close
+    to ``fps`` frames per second.
+
+    A GIF stores each frame's duration in hundredths of a second, so a frame of 45 ms would play as 40 ms or
+    50 ms. Among the step counts from half to twice ``1 / (fps * dt)``, the nearest one whose frames last a whole
+    number of hundredths is taken (Humanoid's 0.015 s: 2 steps, 30 ms, rather than 3 steps, 45 ms); if there is
+    none, the nearest one.
+    """
+    ideal = 1 / (fps * dt)
+    nearest = max(1, round(ideal))
+    exact = [k for k in range(max(1, int(ideal / 2)), max(2, int(2 * ideal) + 1))
+             if abs(k * dt * 100 - round(k * dt * 100)) < 1e-6]
+    return min(exact, key=lambda k: (abs(k - ideal), k)) if exact else nearest
+
+
 def realtime_gif(
     env_id: str,
     policy: Policy | None = None,
@@ -197,15 +213,15 @@ def realtime_gif(
 ) -> Clip:
     """About ``seconds`` of simulation of ``policy`` in ``env_id`` as a GIF that plays in real time.
 
-    A frame is kept every ``frame_skip = round(1 / (fps * dt))`` steps (at least 1), so that the GIF runs at
-    close to ``fps`` frames per second, and each frame is shown for exactly the simulated time it stands for,
+    A frame is kept every ``frame_skip`` steps (:func:`realtime_frame_skip`), so that the GIF runs at close to
+    ``fps`` frames per second, and each frame is shown for exactly the simulated time it stands for,
     ``frame_skip * dt``. The clip is as many whole frames as come closest to ``seconds``; ``Clip.seconds``
     says exactly how long it is. The rest is :func:`render_gif`.
     """
     if seconds <= 0 or fps <= 0:
         raise ValueError(f"seconds and fps must be positive, got {seconds} and {fps}")
     dt = env_dt(env_id, env_kwargs)
-    frame_skip = max(1, round(1 / (fps * dt)))
+    frame_skip = realtime_frame_skip(dt, fps)
     frames = max(1, round(seconds / (frame_skip * dt)))
     gif = render_gif(env_id, policy, max_frames=frames, seed=seed, fps=1 / (frame_skip * dt), width=width,
                      height=height, env_kwargs=env_kwargs, frame_skip=frame_skip, colors=colors)
