@@ -90,3 +90,28 @@ def overrides(config_cls: type, pairs: list[str]) -> dict[str, Any]:
             raise ValueError(f"{config_cls.__module__}.Config has no field {key!r}; fields: {', '.join(sorted(fields))}")
         out[key] = parse_value(text, hints.get(key))
     return out
+
+
+def set_args(overrides: dict[str, Any]) -> list[str]:
+    """``["--set", "key=value", ...]`` that :func:`overrides` reads back as ``overrides`` (its inverse).
+
+    Strings go as they are, everything else as JSON (a tuple as a list, ``True`` as ``true``), keys in order.
+    """
+    def text(value: Any) -> str:
+        if isinstance(value, str):
+            return value
+        return json.dumps(list(value) if isinstance(value, tuple) else value)
+
+    return [arg for key, value in overrides.items() for arg in ("--set", f"{key}={text(value)}")]
+
+
+def train_command(algo: str, env_id: str, steps: int, seed: int, config: Any) -> str:
+    """The ``python -m rlcore train`` line that trains ``config`` (a Config dataclass): only the fields that differ
+    from the Config's defaults are set."""
+    import shlex
+
+    default = type(config)()
+    changed = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)
+               if getattr(config, f.name) != getattr(default, f.name)}
+    return shlex.join(["python", "-m", "rlcore", "train", algo, "--env", env_id, "--steps", str(steps),
+                       "--seed", str(seed), *set_args(changed)])

@@ -47,6 +47,8 @@ from rlcore.experiments.registry import (  # noqa: F401
     run_paths,
 )
 from rlcore.experiments.runner import (  # noqa: F401
+    config_class,
+    distributed_command,
     export_policy,
     train_one,
     run_in_pool,
@@ -59,6 +61,7 @@ from rlcore.experiments.results import (  # noqa: F401
     load_experiment,
     load_or_train,
     provenance_markdown,
+    live_provenance_markdown,
     status_lines,
 )
 from rlcore.experiments.analysis import (  # noqa: F401

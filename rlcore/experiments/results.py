@@ -161,6 +161,22 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
     return text
 
 
+def live_provenance_markdown(label: str, what: str, command: str | None = None) -> str:
+    """The provenance of a run a page trained itself while the book was built, in a collapsed dropdown
+    ("Provenance: <label>"): ``what`` it was (seed, steps, settings), the command line that repeats it, and the
+    commit, versions and machine of the process that trained it (this one: :func:`rlcore.runs.run_metadata`)."""
+    from rlcore.runs import run_metadata
+
+    meta = run_metadata()
+    v, commit = meta["versions"], meta.get("commit") or "unknown"
+    text = (f"*{label}*: trained on this page while the book was built, not read from `results/`: {what}. "
+            + (f"The same run from the command line: `{command}`. " if command else "")
+            + f"Code at commit {commit[:7]}{' (with uncommitted changes)' if commit.endswith('+dirty') else ''}; "
+            f"Gymnasium {v.get('gymnasium')}, PyTorch {v.get('torch')}, NumPy {v.get('numpy')}, "
+            f"Python {v.get('python')}, {meta['machine'].get('cpus', '?')} CPUs.")
+    return f"::::{{dropdown}} Provenance: {label}\n{text}\n::::\n"
+
+
 def status_lines(name: str, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
     """One line per run: seeds finished in ``results``, and how far each unfinished one has trained in ``work``."""
     lines = []

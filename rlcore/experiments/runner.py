@@ -4,7 +4,6 @@ outputs copied to ``results/`` when a seed finishes.
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import os
 import shutil
@@ -40,13 +39,6 @@ def config_class(algo: str) -> type:
     return get_algorithm(algo).Config
 
 
-def _set_value(value: Any) -> str:
-    """A Config value as ``--set key=VALUE`` text that :func:`rlcore.cli.parse_value` reads back unchanged."""
-    if isinstance(value, str):
-        return value
-    return json.dumps(list(value) if isinstance(value, tuple) else value)
-
-
 def distributed_command(spec: RunSpec, seed: int, out: str | os.PathLike) -> list[str]:
     """The torchrun command line that trains one seed of a ``dppo`` spec with ``spec.workers`` workers in ``out``.
 
@@ -55,10 +47,11 @@ def distributed_command(spec: RunSpec, seed: int, out: str | os.PathLike) -> lis
     """
     if spec.algo != "dppo":
         raise ValueError(f"{spec.name}: only dppo runs are started by torchrun, not {spec.algo!r}")
-    sets = [arg for key, value in spec.overrides.items() for arg in ("--set", f"{key}={_set_value(value)}")]
+    from rlcore.cli import set_args
+
     return [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc_per_node={spec.workers}",
             "-m", "rlcore.dppo", "--env", spec.env_id, "--steps", str(spec.steps), "--seed", str(seed),
-            "--out", str(out), "--no-progress", *sets]
+            "--out", str(out), "--no-progress", *set_args(spec.overrides)]
 
 
 def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:
