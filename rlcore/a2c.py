@@ -12,8 +12,9 @@ on everything they collected. The loop:
         one gradient step on  -mean(log pi(a_t|s_t) A_t) + vf_coef * 0.5 mean((V(s_t) - G_t)^2)
                               - ent_coef * mean(entropy of pi(.|s_t))
 
-The networks, the environment wrappers and the deterministic policy are PPO's (:mod:`rlcore.ppo`): the two
-algorithms differ in how they use a rollout, not in what they run on it.
+The networks, the environment wrappers, the rollout and the deterministic policy are the on-policy core's
+(:mod:`rlcore.onpolicy`), shared with PPO: the two algorithms differ in how they use a rollout, not in what they
+run on it.
 """
 
 from __future__ import annotations
@@ -26,17 +27,16 @@ import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from rlcore.buffers import gae
-from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
 from rlcore.config import check_budget, check_config
-from rlcore.envs import find_wrapper, make_env
-from rlcore.evaluate import evaluate_policy
-from rlcore.logger import CSVLogger
-from rlcore.onpolicy import ACTIVATIONS, ActorCritic, PPOPolicy, make_agent, make_envs
+from rlcore.envs import make_env
+from rlcore.harness import Run, evaluation, running_stats, torch_rng
+from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, PPOPolicy, Rollout, annealing,  # noqa: F401
+                             collect_rollout, deterministic_policy, make_agent, make_envs, normalize,
+                             set_learning_rate, training_statistics, valid_batch)
 from rlcore.onpolicy import check_spaces as _check_spaces
-from rlcore.runs import config_dict, config_from_dict, open_run
+from rlcore.runs import config_from_dict
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -158,87 +158,23 @@ def entropy_bonus(agent: ActorCritic, dist: torch.distributions.Distribution) ->
 # --- a rollout and one update ------------------------------------------------------------------
 
 
-@dataclass
-class Rollout:
-    """n_steps steps of num_envs environments; arrays of shape (T, n_envs, ...)."""
-
-    obs: np.ndarray
-    actions: np.ndarray
-    rewards: np.ndarray
-    values: np.ndarray
-    """V(s_t)."""
-    next_values: np.ndarray
-    """V(s_{t+1}); where an episode ended, of its last observation."""
-    terminated: np.ndarray
-    truncated: np.ndarray
-    valid: np.ndarray
-    """False on a vector environment's reset steps (after an episode ended), whose action was ignored."""
-
-
-def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndarray, ended: np.ndarray,
-                    n_steps: int) -> tuple[Rollout, np.ndarray, np.ndarray, list[tuple[int, float, int]]]:
-    """Run the stochastic policy for ``n_steps`` steps in every environment.
-
-    ``obs`` and ``ended`` (which environments finished an episode on the last step) carry over from one
-    rollout to the next. Returns the rollout, the new ``obs`` and ``ended``, and the episodes that finished,
-    as ``(t, return, length)``.
-    """
-    n, T = envs.num_envs, n_steps
-    act_shape = () if agent.discrete else (agent.log_std.numel(),)
-    r = Rollout(obs=np.zeros((T, n, obs.shape[-1]), np.float32), actions=np.zeros((T, n, *act_shape), np.float32),
-                **{k: np.zeros((T, n), np.float32) for k in ("rewards", "values", "next_values")},
-                **{k: np.zeros((T, n), bool) for k in ("terminated", "truncated", "valid")})
-    have_next = np.zeros((T, n), dtype=bool)
-    episodes = []
-    for t in range(T):
-        with torch.no_grad():
-            x = torch.as_tensor(obs, dtype=torch.float32)
-            action = agent.distribution(x).sample()
-            r.values[t] = agent.value(x).numpy()
-        a = action.numpy()
-        next_obs, reward, terminated, truncated, info = envs.step(a)
-        r.obs[t], r.actions[t], r.rewards[t] = obs, a, reward
-        # Gymnasium's vector envs reset an ended episode on the *next* step, which ignores its action
-        r.valid[t] = ~ended
-        r.terminated[t], r.truncated[t] = terminated, truncated
-        ended = terminated | truncated
-        if "episode" in info:
-            episodes += [(t, float(info["episode"]["r"][i]), int(info["episode"]["l"][i]))
-                         for i in np.flatnonzero(info["_episode"])]
-        # V(s_{t+1}) is the next step's V(s_t), except where an episode ended (its last state) or at the end
-        if ended.any() or t == T - 1:
-            with torch.no_grad():
-                r.next_values[t] = agent.value(torch.as_tensor(next_obs, dtype=torch.float32)).numpy()
-            have_next[t] = True
-        obs = next_obs
-    fill = ~have_next[:-1]
-    r.next_values[:-1][fill] = r.values[1:][fill]
-    return r, obs, ended, episodes
-
-
 def returns_and_advantages(r: Rollout, gamma: float, gae_lambda: float) -> tuple[np.ndarray, np.ndarray]:
     """(G_t, A_t): n-step returns and G_t - V(s_t) for lambda = 1, else GAE(lambda) and A_t + V(s_t)."""
     if gae_lambda == 1.0:
         returns = n_step_returns(r.rewards, r.next_values, r.terminated, r.truncated, gamma)
         return returns, advantage(returns, r.values)
-    adv, returns = gae(r.rewards, r.values, r.next_values, r.terminated, r.terminated | r.truncated, gamma,
-                       gae_lambda)
+    adv, returns = gae(r.rewards, r.values, r.next_values, r.terminated, r.episode_ends, gamma, gae_lambda)
     return returns, adv
 
 
-def update(agent: ActorCritic, optimizer: torch.optim.Optimizer, r: Rollout, returns: np.ndarray,
-           advantages: np.ndarray, config: Config) -> dict[str, float]:
-    """One gradient step on the rollout's valid steps: policy gradient + value regression - entropy bonus."""
-    keep = r.valid.reshape(-1)
-    obs = torch.as_tensor(r.obs.reshape(keep.size, -1)[keep])
-    actions = torch.as_tensor(r.actions.reshape(keep.size, *r.actions.shape[2:])[keep])
-    ret = torch.as_tensor(returns.reshape(-1)[keep], dtype=torch.float32)
-    adv = torch.as_tensor(advantages.reshape(-1)[keep], dtype=torch.float32)
-    if config.normalize_advantage and len(adv) > 1:
-        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-    dist = agent.distribution(obs)
-    pg = policy_gradient_loss(agent.log_prob(dist, actions), adv)
-    vl = value_loss(agent.value(obs), ret)
+def update(agent: ActorCritic, optimizer: torch.optim.Optimizer, batch: dict[str, torch.Tensor],
+           config: Config) -> dict[str, float]:
+    """One gradient step on a rollout's valid steps (:func:`rlcore.onpolicy.valid_batch`): policy gradient + value
+    regression - entropy bonus."""
+    adv = normalize(batch["adv"]) if config.normalize_advantage else batch["adv"]
+    dist = agent.distribution(batch["obs"])
+    pg = policy_gradient_loss(agent.log_prob(dist, batch["act"]), adv)
+    vl = value_loss(agent.value(batch["obs"]), batch["ret"])
     ent = entropy_bonus(agent, dist)
     loss = pg + config.vf_coef * vl - config.ent_coef * ent
     optimizer.zero_grad(set_to_none=True)
@@ -271,6 +207,10 @@ class Result:
     steps: int
 
 
+UPDATE_COLUMNS = ["iteration", "step", "policy_loss", "value_loss", "entropy", "grad_norm", "learning_rate"]
+"""The columns of a run's ``updates.csv``: one row every ``log_every`` iterations."""
+
+
 def train(
     env_id: str,
     config: Config | None = None,
@@ -291,102 +231,42 @@ def train(
         raise
     agent = make_agent(spaces, config)
     optimizer = make_optimizer(agent, config)
-    obs_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
-    rew_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeReward)
+    obs_rms, ret_rms = training_statistics(envs)
     eval_env = make_env(env_id, **config.env_kwargs)
     per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)
-    step = iteration = 0
-    returns: list[float] = []
-    end_steps: list[int] = []
-    evals: list[tuple[int, float]] = []
+    run = Run("a2c", env_id, config, steps, seed, out, progress, desc=f"A2C {env_id}", target=iterations * per_iter,
+              schedules=annealing(config), eval_at_end=True, close=(envs, eval_env),
+              evaluate=lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
+                                          config.eval_episodes, seed + 10_000),
+              logs={"updates": UPDATE_COLUMNS})
+    run.track(agent=agent, optimizer=optimizer, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
+              ret=running_stats(ret_rms, "ret"), spaces=spaces, obs_clip=OBS_CLIP)
+    step, iteration = run.resume(step=0, iteration=0)
+    buf = Rollout(spaces, config.n_steps, config.num_envs)
 
-    def policy() -> PPOPolicy:
-        mean = obs_norm.obs_rms.mean.copy() if obs_norm else None
-        var = obs_norm.obs_rms.var.copy() if obs_norm else None
-        return PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
-
-    run, ckpt = open_run(out, "a2c", env_id, seed, steps, config,
-                         schedules="learning-rate annealing" if config.anneal_lr else None)
-    if ckpt is not None:
-        agent.load_state_dict(ckpt["agent"])
-        optimizer.load_state_dict(ckpt["optimizer"])
-        step, iteration = int(ckpt["step"]), int(ckpt["iteration"])
-        torch.set_rng_state(ckpt["torch_rng"])
-        if obs_norm is not None:
-            load_running_stats(obs_norm.obs_rms, ckpt, "obs")
-        if rew_norm is not None:
-            load_running_stats(rew_norm.return_rms, ckpt, "ret")
-    log = eval_log = upd_log = None
-    if run is not None:
-        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length"])
-        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
-        upd_log = CSVLogger(run.root / "updates.csv", ["iteration", "step", "policy_loss", "value_loss", "entropy",
-                                                       "grad_norm", "learning_rate"])
-
-    def checkpoint() -> None:
-        if run is None:
-            return
-        state = {"algo": "a2c", "env_id": env_id, "seed": seed, "config": config_dict(config), "step": step,
-                 "iteration": iteration, "total_steps": steps, "complete": iteration >= iterations,
-                 "episode": len(returns), "agent": agent.state_dict(), "optimizer": optimizer.state_dict(),
-                 "torch_rng": torch.get_rng_state(), "spaces": spaces, "obs_clip": 10.0,
-                 "obs_mean": None, "obs_var": None}
-        if obs_norm is not None:
-            state.update(running_stats_state(obs_norm.obs_rms, "obs"))
-        if rew_norm is not None:
-            state.update(running_stats_state(rew_norm.return_rms, "ret"))
-        save_checkpoint(run.checkpoint, state)
+    def on_episode(t: int, episode_return: float, length: int) -> None:  # an episode ended at rollout step t
+        run.record_episode(step + (t + 1) * config.num_envs, episode_return, length)
 
     obs, _ = envs.reset(seed=seed + 1_000 * iteration)
-    ended = np.zeros(config.num_envs, dtype=bool)
-    bar = tqdm(total=iterations * per_iter, initial=min(step, iterations * per_iter), disable=not progress,
-               unit="step", desc=f"A2C {env_id}")
-    try:
+    with run:
         while iteration < iterations:
-            lr = config.learning_rate * (1.0 - iteration / iterations if config.anneal_lr else 1.0)
-            for g in optimizer.param_groups:
-                g["lr"] = lr
+            # [a2c-loop]
+            lr = set_learning_rate(optimizer, config, iteration / iterations)
             # 1. run the policy for n_steps steps in each environment
-            rollout, obs, ended, episodes = collect_rollout(agent, envs, obs, ended, config.n_steps)
-            for t, ret, length in episodes:
-                returns.append(ret)
-                end_steps.append(step + (t + 1) * config.num_envs)
-                if log is not None:
-                    log.log(episode=len(returns), step=end_steps[-1], episode_return=ret, episode_length=length)
+            obs = collect_rollout(agent, envs, obs, buf, on_episode)
             step += per_iter
             # 2. n-step returns (or GAE) and advantages
-            ret, adv = returns_and_advantages(rollout, config.gamma, config.gae_lambda)
+            ret, adv = returns_and_advantages(buf, config.gamma, config.gae_lambda)
             # 3. one gradient step
-            stats = update(agent, optimizer, rollout, ret, adv, config)
+            stats = update(agent, optimizer, valid_batch(buf, adv, ret), config)
             iteration += 1
-            if upd_log is not None and (iteration % config.log_every == 0 or iteration == iterations):
-                upd_log.log(iteration=iteration, step=step, learning_rate=lr, **stats)
-            crossed = lambda every: every and step // every > (step - per_iter) // every  # noqa: E731
-            if crossed(config.eval_every) or (config.eval_every and iteration == iterations):
-                r = evaluate_policy(policy(), eval_env, config.eval_episodes, seed=seed + 10_000)
-                agent.train()
-                evals.append((step, float(r.mean())))
-                if eval_log is not None:
-                    eval_log.log(step=step, mean_return=float(r.mean()), std_return=float(r.std()), episodes=len(r))
-            if crossed(config.checkpoint_every):
-                checkpoint()
-            bar.update(per_iter)
-            if returns:
-                bar.set_postfix(ret=f"{np.mean(returns[-10:]):.1f}", refresh=False)
-    except KeyboardInterrupt:
-        checkpoint()
-        raise
-    finally:
-        bar.close()
-        envs.close()
-        eval_env.close()
-        for f in (log, eval_log, upd_log):
-            if f is not None:
-                f.close()
-    checkpoint()
-    return Result(agent, policy(), np.array(returns), np.array(end_steps, dtype=int),
-                  np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step)
+            # [/a2c-loop]
+            if iteration % config.log_every == 0 or iteration == iterations:
+                run.log("updates", iteration=iteration, step=step, learning_rate=lr, **stats)
+            run.step_done(step, step - per_iter, iteration=iteration)
+    return Result(agent, deterministic_policy(agent, spaces, obs_rms), run.episode_returns, run.episode_end_steps,
+                  run.eval_steps, run.eval_returns, step)
 
 
 # --- what the command line needs ----------------------------------------------------------------

@@ -59,23 +59,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
 import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
-from tqdm import tqdm
 
 from rlcore import ppo
-from rlcore.checkpoint import (CheckpointError, load_checkpoint, load_running_stats, running_stats_state,
-                               save_checkpoint)
+from rlcore.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from rlcore.config import check_budget
-from rlcore.envs import find_wrapper, make_env
-from rlcore.evaluate import evaluate_policy
-from rlcore.logger import CSVLogger
-from rlcore.onpolicy import PPOPolicy, check_spaces, make_agent, make_envs
+from rlcore.envs import make_env
+from rlcore.harness import Run, evaluation, running_stats
+from rlcore.onpolicy import (OBS_CLIP, Rollout, annealing, check_spaces, collect_rollout, deterministic_policy,
+                             make_agent, make_envs, set_learning_rate, training_statistics)
 from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
-from rlcore.ppo import Rollout, collect_rollout, ppo_update, rollout_batch
+from rlcore.ppo import ppo_update, rollout_batch
 from rlcore.runs import RunDir, config_dict, open_run
 
 ALGO = "ppo"
@@ -244,185 +241,141 @@ def train(
             dist.destroy_process_group()
 
 
-def _train(env_id, config: Config, steps, seed, out, progress, dump_params, command) -> ppo.Result:
-    rank, world = dist.get_rank(), dist.get_world_size()
-    worker_seed = seed + 1_000 * rank
-    torch.manual_seed(seed)  # the same initial weights on every worker (DDP also broadcasts rank 0's)
-    envs = make_envs(env_id, config, worker_seed)
-    spaces = check_spaces(envs, env_id)
-    agent = make_agent(spaces, config)
-    optimizer = ppo.make_optimizer(agent, config)
-    obs_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
-    rew_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeReward)
-    eval_env = make_env(env_id, **config.env_kwargs) if rank == 0 and config.eval_every else None
-    per_update = config.n_steps * config.num_envs * world
-    iterations = -(-steps // per_update)
-    target = iterations * per_update
-    step = iteration = 0
-    kl_coef = config.kl_coef
-    returns: list[float] = []
-    end_steps: list[int] = []
-    evals: list[tuple[int, float]] = []
-    distributed = {"world_size": world, "backend": dist.get_backend()}
-
-    # rank 0 opens the run folder and hands its checkpoint (or its error) to every worker
-    run = ckpt = error = None
-    if rank == 0:
+def open_on_rank0(out, env_id: str, config: Config, steps: int, seed: int, meta: dict[str, Any]):
+    """Rank 0 opens the run folder (:func:`rlcore.runs.open_run`) and hands its checkpoint, or its error, to every
+    worker: ``(run folder or None, checkpoint or None)`` on each."""
+    folder = ckpt = error = None
+    if dist.get_rank() == 0:
         try:
             path = None if out is None else RunDir(out).checkpoint
             if path is not None and path.exists() and (prior := load_checkpoint(path)).get("algo") == ALGO \
                     and not prior.get("distributed"):
                 raise ValueError(f"{out} holds a single-process PPO run; resume it with `python -m rlcore train ppo`, "
                                  "or choose another --out folder.")
-            meta = {"distributed": distributed, **({"command": command} if command else {})}
-            run, ckpt = open_run(out, ALGO, env_id, seed, steps, config,
-                                 schedules="learning-rate annealing" if config.anneal_lr else None, **meta)
+            folder, ckpt = open_run(out, ALGO, env_id, seed, steps, config, schedules=annealing(config), **meta)
         except (ValueError, CheckpointError) as exc:
             error = str(exc)
     ckpt, error = _broadcast((ckpt, error))
     if error is not None:
         raise ValueError(error)
-    if ckpt is not None:
-        agent.load_state_dict(ckpt["agent"])
-        optimizer.load_state_dict(ckpt["optimizer"])
-        step, iteration, kl_coef = int(ckpt["step"]), int(ckpt["iteration"]), float(ckpt["kl_coef"])
-        if obs_norm is not None:
-            load_running_stats(obs_norm.obs_rms, ckpt, "obs")
-        if rew_norm is not None:
-            load_running_stats(rew_norm.return_rms, ckpt, "ret")
-    if ckpt is None:
-        # rank 0 continues the initialization's stream, as ppo.train does: one worker is ppo.train
-        rng = np.random.default_rng(worker_seed)
+    return folder, ckpt
+
+
+def worker_streams(seed: int, rank: int, iteration: int, resumed: bool) -> tuple[np.random.Generator, int]:
+    """This worker's minibatch-shuffling generator and environment reset seed; torch's generator is seeded too.
+
+    A new run: ``seed + 1000 rank`` (rank 0 continues the initialization's torch stream, as ppo.train does, so
+    that one worker is ppo.train). A resumed one: all three from ``(seed, rank, iteration)``."""
+    worker_seed = seed + 1_000 * rank
+    if not resumed:
         if rank:
             torch.manual_seed(worker_seed)
-        reset_seed = worker_seed
-    else:
-        ss = np.random.SeedSequence([seed, rank, iteration])
-        rng = np.random.default_rng(ss)
-        torch.manual_seed(int(ss.generate_state(1)[0]))
-        reset_seed = int(ss.generate_state(2)[1])
+        return np.random.default_rng(worker_seed), worker_seed
+    ss = np.random.SeedSequence([seed, rank, iteration])
+    torch.manual_seed(int(ss.generate_state(1)[0]))
+    return np.random.default_rng(ss), int(ss.generate_state(2)[1])
+
+
+def distributed_update(model, agent, optimizer, buf: Rollout, config: Config, kl_coef: float,
+                       rng: np.random.Generator, seed: int, iteration: int) -> tuple[np.ndarray, float]:
+    """PPO's minibatch steps on this worker's rollout (the same number of them on every worker), either with the
+    gradients averaged by DDP, or on all workers' rollouts, gathered, with the same shuffling everywhere."""
+    batch = rollout_batch(buf, config)
+    n_batches = torch.tensor(max(len(batch["obs"]) // config.batch_size, 1))
+    dist.all_reduce(n_batches, op=dist.ReduceOp.MIN)
+    if config.share == "gradients":
+        return ppo_update(model, optimizer, batch, config, kl_coef, rng, int(n_batches))
+    update_rng = np.random.default_rng([seed, iteration])
+    stats, mean_kl = ppo_update(model, optimizer, gather_rollouts(batch), config, kl_coef, update_rng, int(n_batches))
+    broadcast_weights(agent)  # identical already on identical machines; exact on mixed ones too
+    return stats, mean_kl
+
+
+def mean_over_workers(stats: np.ndarray, mean_kl: float, new_returns: list[float]) -> tuple[list[float], int, float]:
+    """The workers' mean update statistics (:data:`rlcore.ppo.UPDATE_STATS`, then the KL the adaptive rule reads),
+    and the number and mean return of the episodes that ended on any worker (NaN if none)."""
+    summary = torch.tensor([*np.mean(stats, axis=0), mean_kl, sum(new_returns), len(new_returns)], dtype=torch.float64)
+    dist.all_reduce(summary)
+    episodes = int(summary[7])
+    return (summary[:6] / dist.get_world_size()).tolist(), episodes, float(summary[6]) / episodes if episodes else float("nan")
+
+
+def dump_worker_state(folder, agent, optimizer, kl_coef: float, step: int, iteration: int, *stats) -> None:
+    """(Testing) this worker's weights, optimizer, KL coefficient and statistics in ``folder/rank{r}.pt``."""
+    state = {"agent": agent.state_dict(), "optimizer": optimizer.state_dict(), "kl_coef": kl_coef, "step": step,
+             "iteration": iteration}
+    for name, rms in zip(("obs", "ret"), stats):
+        if rms is not None:
+            state.update({f"{name}_mean": rms.mean, f"{name}_var": rms.var, f"{name}_count": float(rms.count)})
+    save_checkpoint(Path(folder) / f"rank{dist.get_rank()}.pt", state)
+
+
+def _train(env_id, config: Config, steps, seed, out, progress, dump_params, command) -> ppo.Result:
+    rank, world = dist.get_rank(), dist.get_world_size()
+    torch.manual_seed(seed)  # the same initial weights on every worker (DDP also broadcasts rank 0's)
+    envs = make_envs(env_id, config, seed + 1_000 * rank)
+    spaces = check_spaces(envs, env_id)
+    agent = make_agent(spaces, config)
+    optimizer = ppo.make_optimizer(agent, config)
+    obs_rms, ret_rms = training_statistics(envs)
+    eval_env = make_env(env_id, **config.env_kwargs) if rank == 0 and config.eval_every else None
+    per_update = config.n_steps * config.num_envs * world
+    target = -(-steps // per_update) * per_update
+    distributed = {"world_size": world, "backend": dist.get_backend()}
+    opened = open_on_rank0(out, env_id, config, steps, seed, {"distributed": distributed, **({"command": command} if command else {})})
+    evaluate = (lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env, config.eval_episodes,
+                                   seed + 10_000)) if eval_env is not None else None
+    run = Run(ALGO, env_id, config, steps, seed, progress=progress and rank == 0, opened=opened, target=target,
+              desc=f"DPPO-{config.objective} {env_id} x{world}", evaluate=evaluate, eval_at_end=True,
+              episode_log=None, logs={"progress": PROGRESS_COLUMNS}, checkpoint_on="iteration",
+              checkpoint_every=config.checkpoint_updates, checkpoint_on_interrupt=False, close=(envs, eval_env))
+    run.track(agent=agent, optimizer=optimizer, obs=running_stats(obs_rms, "obs"), ret=running_stats(ret_rms, "ret"),
+              spaces=spaces, obs_clip=OBS_CLIP, distributed=distributed)
+    step, iteration, kl_coef = run.resume(step=0, iteration=0, kl_coef=config.kl_coef)
+    rng, reset_seed = worker_streams(seed, rank, iteration, resumed=opened[1] is not None)
     model = DistributedDataParallel(agent) if config.share == "gradients" else agent
-    obs_base = snapshot(obs_norm.obs_rms) if obs_norm is not None else None
-    ret_base = snapshot(rew_norm.return_rms) if rew_norm is not None else None
-
-    def policy() -> PPOPolicy:
-        mean = obs_norm.obs_rms.mean.copy() if obs_norm else None
-        var = obs_norm.obs_rms.var.copy() if obs_norm else None
-        return PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
-
-    log = eval_log = None
-    if run is not None:
-        log = CSVLogger(run.progress, PROGRESS_COLUMNS)
-        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
-
-    def checkpoint() -> None:
-        if run is None:
-            return
-        state = {"algo": ALGO, "env_id": env_id, "seed": seed, "config": config_dict(config), "step": step,
-                 "iteration": iteration, "total_steps": steps, "complete": step >= target,
-                 "agent": agent.state_dict(), "optimizer": optimizer.state_dict(), "kl_coef": kl_coef,
-                 "spaces": spaces, "obs_clip": 10.0, "distributed": distributed}
-        if obs_norm is not None:
-            state.update(running_stats_state(obs_norm.obs_rms, "obs"))
-        else:
-            state.update(obs_mean=None, obs_var=None)
-        if rew_norm is not None:
-            state.update(running_stats_state(rew_norm.return_rms, "ret"))
-        save_checkpoint(run.checkpoint, state)
-
-    buf = Rollout(spaces, config)
+    normalizers = [rms for rms in (obs_rms, ret_rms) if rms is not None]
+    bases = [snapshot(rms) for rms in normalizers]
+    buf = Rollout(spaces, config.n_steps, config.num_envs)
     new_returns: list[float] = []
 
-    def on_episode(t: int, episode_return: float, episode_length: int) -> None:
-        returns.append(episode_return)
-        end_steps.append(step + (t + 1) * config.num_envs * world)
+    def on_episode(t: int, episode_return: float, length: int) -> None:  # an episode ended at rollout step t
+        run.record_episode(step + (t + 1) * config.num_envs * world, episode_return, length)
         new_returns.append(episode_return)
 
     obs, _ = envs.reset(seed=reset_seed)
-    bar = tqdm(total=target, initial=min(step, target), disable=not (progress and rank == 0), unit="step",
-               desc=f"DPPO-{config.objective} {env_id} x{world}")
     last = time.perf_counter()
-    saved = None
-    try:
+    with run:
         while step < target:
-            lr = config.learning_rate * (1.0 - step / target if config.anneal_lr else 1.0)
-            for g in optimizer.param_groups:
-                g["lr"] = lr
+            # [dppo-loop]
+            lr = set_learning_rate(optimizer, config, step / target)
             # 1. every worker runs the policy in its own environments, then they merge their statistics
             obs = collect_rollout(agent, envs, obs, buf, on_episode)
             rollout_seconds = time.perf_counter() - last
             if world > 1:
-                if obs_norm is not None:
-                    obs_base = sync_running_stats(obs_norm.obs_rms, obs_base)
-                if rew_norm is not None:
-                    ret_base = sync_running_stats(rew_norm.return_rms, ret_base)
+                bases = [sync_running_stats(rms, base) for rms, base in zip(normalizers, bases)]
             step += per_update
-            # 2. advantages; 3. minibatch steps (the same number on every worker), either with gradients
-            # averaged by DDP, or on all workers' rollouts, gathered, with the same shuffling everywhere
-            batch = rollout_batch(buf, config)
-            n_batches = torch.tensor(max(len(batch["obs"]) // config.batch_size, 1))
-            dist.all_reduce(n_batches, op=dist.ReduceOp.MIN)
-            if config.share == "gradients":
-                stats, mean_kl = ppo_update(model, optimizer, batch, config, kl_coef, rng, int(n_batches))
-            else:
-                update_rng = np.random.default_rng([seed, iteration])
-                stats, mean_kl = ppo_update(model, optimizer, gather_rollouts(batch), config, kl_coef, update_rng,
-                                            int(n_batches))
-                broadcast_weights(agent)  # identical already on identical machines; exact on mixed ones too
-            # the workers' means: the KL for beta's rule (so beta stays the same everywhere), the logged numbers
-            summary = torch.tensor([*np.mean(stats, axis=0), mean_kl, sum(new_returns), len(new_returns)],
-                                   dtype=torch.float64)
-            dist.all_reduce(summary)
-            m = (summary[:6] / world).tolist()
-            mean_kl, episodes = m[5], int(summary[7])
-            episode_return = float(summary[6]) / episodes if episodes else float("nan")
+            # 2. advantages; 3. the same number of minibatch steps on every worker, on everyone's data
+            stats, mean_kl = distributed_update(model, agent, optimizer, buf, config, kl_coef, rng, seed, iteration)
+            # the workers' means: the KL for beta's rule (so that beta stays the same everywhere), the logged numbers
+            m, episodes, episode_return = mean_over_workers(stats, mean_kl, new_returns)
             new_returns.clear()
             if config.objective == "kl":
-                kl_coef = ppo.adaptive_kl_coef(kl_coef, mean_kl, config.kl_target, config.kl_beta_low,
+                kl_coef = ppo.adaptive_kl_coef(kl_coef, m[5], config.kl_target, config.kl_beta_low,
                                                config.kl_beta_high, config.kl_alpha)
             iteration += 1
-            if rank == 0:
-                crossed = lambda every: every and step // every > (step - per_update) // every  # noqa: E731
-                if crossed(config.eval_every) or (config.eval_every and step >= target):
-                    r = evaluate_policy(policy(), eval_env, config.eval_episodes, seed=seed + 10_000)
-                    agent.train()
-                    evals.append((step, float(r.mean())))
-                    if eval_log is not None:
-                        eval_log.log(step=step, mean_return=float(r.mean()), std_return=float(r.std()),
-                                     episodes=len(r))
-                if config.checkpoint_updates and iteration % config.checkpoint_updates == 0:
-                    checkpoint()
-                    saved = iteration
-                now = time.perf_counter()
-                if log is not None:
-                    log.log(iteration=iteration, step=step, episodes=episodes, episode_return=episode_return,
-                            env_steps_per_second=per_update / (now - last), update_seconds=now - last,
-                            rollout_seconds=rollout_seconds, policy_loss=m[0], value_loss=m[1], entropy=m[2],
-                            approx_kl=mean_kl, clip_fraction=m[4], kl_coef=kl_coef, learning_rate=lr,
-                            world_size=world)
-                bar.update(per_update)
-                if episodes:
-                    bar.set_postfix(ret=f"{episode_return:.1f}", refresh=False)
+            # [/dppo-loop]
+            run.step_done(step, step - per_update, iteration=iteration, kl_coef=kl_coef)
+            now = time.perf_counter()
+            run.log("progress", iteration=iteration, step=step, episodes=episodes, episode_return=episode_return,
+                    env_steps_per_second=per_update / (now - last), update_seconds=now - last,
+                    rollout_seconds=rollout_seconds, policy_loss=m[0], value_loss=m[1], entropy=m[2], approx_kl=m[5],
+                    clip_fraction=m[4], kl_coef=kl_coef, learning_rate=lr, world_size=world)
             last = time.perf_counter()
-    finally:
-        bar.close()
-        envs.close()
-        if eval_env is not None:
-            eval_env.close()
-        for f in (log, eval_log):
-            if f is not None:
-                f.close()
-    if saved != iteration or saved is None:
-        checkpoint()
     if dump_params is not None:
-        state = {"agent": agent.state_dict(), "optimizer": optimizer.state_dict(), "kl_coef": kl_coef,
-                 "step": step, "iteration": iteration}
-        for name, rms in (("obs", obs_norm and obs_norm.obs_rms), ("ret", rew_norm and rew_norm.return_rms)):
-            if rms:
-                state.update({f"{name}_mean": rms.mean, f"{name}_var": rms.var, f"{name}_count": float(rms.count)})
-        save_checkpoint(Path(dump_params) / f"rank{rank}.pt", state)
-    return ppo.Result(agent, policy(), np.array(returns), np.array(end_steps, dtype=int),
-                      np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step)
+        dump_worker_state(dump_params, agent, optimizer, kl_coef, step, iteration, obs_rms, ret_rms)
+    return ppo.Result(agent, deterministic_policy(agent, spaces, obs_rms), run.episode_returns,
+                      run.episode_end_steps, run.eval_steps, run.eval_returns, step)
 
 
 # --- command line ---------------------------------------------------------------------------------

@@ -5,7 +5,10 @@
 - :func:`make_envs`: the vectorized training environments, observations and rewards normalized as configured;
 - :class:`PPOPolicy`: the deterministic policy saved with a run, which applies training's observation scaling to
   raw observations itself; :func:`check_spaces`;
-- :func:`normalize`: advantage standardization.
+- :class:`Rollout` and :func:`collect_rollout`: one rollout of the stochastic policy in every environment, with
+  V(s_{t+1}) bootstrapped at time limits and nothing carried across a reset; :func:`valid_batch` flattens it;
+- :func:`normalize`: advantage standardization; :func:`set_learning_rate`, :func:`training_statistics`,
+  :func:`deterministic_policy`: what every on-policy ``train`` does around its loop.
 
 A Config here is any of :mod:`rlcore.a2c`'s or :mod:`rlcore.ppo`'s: the functions read the fields they share.
 """
@@ -19,7 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.envs import make_vec_env, normalize_observation
+from rlcore.envs import find_wrapper, make_vec_env, normalize_observation
 from rlcore.nets import mlp
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
@@ -142,3 +145,117 @@ def make_envs(env_id: str, config: Any, seed: int) -> gym.vector.VectorEnv:
         envs = gym.wrappers.vector.NormalizeReward(envs, gamma=config.gamma)
         envs = gym.wrappers.vector.TransformReward(envs, lambda r: np.clip(r, -10, 10))
     return envs
+
+
+# --- one rollout --------------------------------------------------------------------------------
+
+
+class Rollout:
+    """One iteration's transitions, preallocated: arrays of shape ``(n_steps, num_envs[, dim])``.
+
+    Gymnasium's vector envs reset an ended episode on the *next* step, which ignores its action: such
+    "reset steps" are recorded (``valid`` False) but never learned from. ``ended`` (which environments ended an
+    episode on the last step) carries over to the next rollout. ``log_probs`` are log pi(a_t|s_t) of the acting
+    policy, ``next_values`` V(s_{t+1}) (where an episode ended, of its last observation).
+    """
+
+    def __init__(self, spaces: dict[str, Any], n_steps: int, num_envs: int):
+        T, n = n_steps, num_envs
+        self.obs = np.zeros((T, n, spaces["obs_dim"]), dtype=np.float32)
+        self.actions = np.zeros((T, n) if spaces["discrete"] else (T, n, spaces["act_dim"]), dtype=np.float32)
+        self.log_probs, self.rewards, self.values, self.next_values = (np.zeros((T, n), np.float32) for _ in range(4))
+        self.terminated, self.truncated, self.valid = (np.zeros((T, n), dtype=bool) for _ in range(3))
+        self.ended = np.zeros(n, dtype=bool)
+        self.have_next = np.zeros((T, n), dtype=bool)  # where V(s_{t+1}) was computed during the rollout
+
+    @property
+    def episode_ends(self) -> np.ndarray:
+        """Where a sum over future steps must stop: an episode's end, and a reset step (never learned from)."""
+        return self.terminated | self.truncated | ~self.valid
+
+
+def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndarray, buf: Rollout,
+                    on_episode=None, explore_noise: float = 0.0) -> np.ndarray:
+    """Run the stochastic policy for ``n_steps`` steps in each environment, filling ``buf``; returns the next
+    observation.
+
+    ``on_episode(t, episode_return, episode_length)`` is called for every episode that ends at rollout step t.
+    ``explore_noise``: the standard deviation of extra Gaussian noise on each sampled (continuous) action; the
+    noisy action and its log-probability under the policy are stored.
+    """
+    T = len(buf.obs)
+    for t in range(T):
+        with torch.no_grad():
+            x = torch.as_tensor(obs, dtype=torch.float32)
+            dist = agent.distribution(x)
+            action = dist.sample()
+            if explore_noise:
+                action = action + explore_noise * torch.randn_like(action)
+            buf.log_probs[t] = agent.log_prob(dist, action).numpy()
+            buf.values[t] = agent.value(x).numpy()
+        a = action.numpy()
+        next_obs, reward, terminated, truncated, info = envs.step(a)
+        buf.obs[t], buf.actions[t], buf.rewards[t] = obs, a, reward
+        buf.valid[t] = ~buf.ended
+        buf.terminated[t], buf.truncated[t] = terminated, truncated
+        buf.ended = terminated | truncated
+        if "episode" in info and on_episode is not None:
+            for i in np.flatnonzero(info["_episode"]):
+                on_episode(t, float(info["episode"]["r"][i]), int(info["episode"]["l"][i]))
+        # V(s_{t+1}) is V of the next step's observation, except where an episode ended: there
+        # s_{t+1} is the episode's last state (bootstrapped at a time limit), computed now
+        if buf.ended.any() or t == T - 1:
+            with torch.no_grad():
+                buf.next_values[t] = agent.value(torch.as_tensor(next_obs, dtype=torch.float32)).numpy()
+            buf.have_next[t] = True
+        obs = next_obs
+    fill = ~buf.have_next[:-1]
+    buf.next_values[:-1][fill] = buf.values[1:][fill]
+    buf.have_next[:] = False
+    return obs
+
+
+def valid_batch(buf: Rollout, advantages: np.ndarray, returns: np.ndarray) -> dict[str, torch.Tensor]:
+    """A rollout's valid transitions, flattened: ``obs``, ``act``, ``logp`` (of the acting policy), ``adv``,
+    ``ret``."""
+    keep = buf.valid.reshape(-1)
+    n = keep.size
+    return {"obs": torch.as_tensor(buf.obs.reshape(n, -1)[keep]),
+            "act": torch.as_tensor(buf.actions.reshape(n, *buf.actions.shape[2:])[keep]),
+            "logp": torch.as_tensor(buf.log_probs.reshape(-1)[keep]),
+            "adv": torch.as_tensor(advantages.reshape(-1)[keep], dtype=torch.float32),
+            "ret": torch.as_tensor(returns.reshape(-1)[keep], dtype=torch.float32)}
+
+
+# --- around the loop ----------------------------------------------------------------------------
+
+
+def set_learning_rate(optimizer: torch.optim.Optimizer, config: Any, done: float) -> float:
+    """The step size after a fraction ``done`` of the run: constant, or decayed linearly to 0 with
+    ``anneal_lr``. Set on every parameter group; returned."""
+    lr = config.learning_rate * (1.0 - done if config.anneal_lr else 1.0)
+    for g in optimizer.param_groups:
+        g["lr"] = lr
+    return lr
+
+
+def annealing(config: Any) -> str | None:
+    """What the step budget shapes in an on-policy run (for :func:`rlcore.runs.open_run`), if anything."""
+    return "learning-rate annealing" if config.anneal_lr else None
+
+
+def training_statistics(envs: gym.vector.VectorEnv) -> tuple[Any, Any]:
+    """The running statistics of the observation and return normalizers of :func:`make_envs` (None where off)."""
+    obs_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
+    rew_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeReward)
+    return (obs_norm.obs_rms if obs_norm else None), (rew_norm.return_rms if rew_norm else None)
+
+
+OBS_CLIP = 10.0
+"""Normalized observations are clipped to +-OBS_CLIP (:func:`make_envs`); the saved policy does the same."""
+
+
+def deterministic_policy(agent: ActorCritic, spaces: dict[str, Any], obs_rms: Any = None) -> PPOPolicy:
+    """The policy to evaluate and save now: the agent with a copy of the current observation statistics."""
+    mean, var = (None, None) if obs_rms is None else (obs_rms.mean.copy(), obs_rms.var.copy())
+    return PPOPolicy(agent, mean, var, OBS_CLIP, spaces.get("low"), spaces.get("high"))

@@ -30,17 +30,16 @@ import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from rlcore.buffers import gae
-from rlcore.checkpoint import load_checkpoint, load_running_stats, running_stats_state, save_checkpoint
+from rlcore.checkpoint import load_checkpoint
 from rlcore.config import check_budget, check_config
-from rlcore.envs import find_wrapper, make_env
-from rlcore.evaluate import evaluate_policy
-from rlcore.logger import CSVLogger
-from rlcore.onpolicy import (ACTIVATIONS, ActorCritic, PPOPolicy, check_spaces, make_agent, make_envs,  # noqa: F401
-                             normalize)
-from rlcore.runs import RunDir, config_dict, open_run
+from rlcore.envs import make_env
+from rlcore.harness import Run, evaluation, running_stats, torch_rng
+from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, PPOPolicy, Rollout, annealing,  # noqa: F401
+                             check_spaces, collect_rollout, deterministic_policy, make_agent, make_envs, normalize,
+                             set_learning_rate, training_statistics, valid_batch)
+from rlcore.runs import RunDir
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -164,76 +163,11 @@ def make_optimizer(agent: nn.Module, config: Config) -> torch.optim.Optimizer:
     return torch.optim.Adam(agent.parameters(), lr=config.learning_rate, eps=1e-5, fused=True)
 
 
-class Rollout:
-    """One iteration's transitions, preallocated: arrays of shape ``(n_steps, num_envs[, dim])``.
-
-    Gymnasium's vector envs reset an ended episode on the *next* step, which ignores its action: such
-    "reset steps" are recorded (``valid`` 0) but never learned from. ``ended`` carries over to the next rollout.
-    """
-
-    def __init__(self, spaces: dict[str, Any], config: Config):
-        T, n_envs = config.n_steps, config.num_envs
-        self.obs = np.zeros((T, n_envs, spaces["obs_dim"]), dtype=np.float32)
-        self.act = np.zeros((T, n_envs) if spaces["discrete"] else (T, n_envs, spaces["act_dim"]), dtype=np.float32)
-        self.logp, self.rew, self.val, self.next_val, self.term, self.end, self.valid = (
-            np.zeros((T, n_envs), dtype=np.float32) for _ in range(7))
-        self.ended = np.zeros(n_envs, dtype=bool)
-        self.have_next = np.zeros((T, n_envs), dtype=bool)  # where V(s_{t+1}) was computed during the rollout
-
-
-def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndarray, buf: Rollout,
-                    on_episode=None, explore_noise: float = 0.0) -> np.ndarray:
-    """Run the policy for ``n_steps`` steps in each environment, filling ``buf``; returns the next observation.
-
-    ``on_episode(t, episode_return, episode_length)`` is called for every episode that ends at rollout step t.
-    ``explore_noise``: the standard deviation of extra Gaussian noise on each sampled (continuous) action; the
-    noisy action and its log-probability under the policy are stored.
-    """
-    T = len(buf.obs)
-    for t in range(T):
-        with torch.no_grad():
-            x = torch.as_tensor(obs, dtype=torch.float32)
-            dist = agent.distribution(x)
-            action = dist.sample()
-            if explore_noise:
-                action = action + explore_noise * torch.randn_like(action)
-            buf.logp[t] = agent.log_prob(dist, action).numpy()
-            buf.val[t] = agent.value(x).numpy()
-        a = action.numpy()
-        next_obs, reward, terminated, truncated, info = envs.step(a)
-        buf.obs[t], buf.act[t], buf.rew[t] = obs, a, reward
-        buf.valid[t] = ~buf.ended
-        buf.ended = terminated | truncated
-        buf.term[t], buf.end[t] = terminated, buf.ended | ~buf.valid[t].astype(bool)
-        if "episode" in info and on_episode is not None:
-            for i in np.flatnonzero(info["_episode"]):
-                on_episode(t, float(info["episode"]["r"][i]), int(info["episode"]["l"][i]))
-        # V(s_{t+1}) is V of the next step's observation, except where an episode ended: there
-        # s_{t+1} is the episode's last state (bootstrapped at a time limit), computed now
-        if buf.ended.any() or t == T - 1:
-            with torch.no_grad():
-                buf.next_val[t] = agent.value(torch.as_tensor(next_obs, dtype=torch.float32)).numpy()
-            buf.have_next[t] = True
-        obs = next_obs
-    fill = ~buf.have_next[:-1]
-    buf.next_val[:-1][fill] = buf.val[1:][fill]
-    buf.have_next[:] = False
-    return obs
-
-
 def rollout_batch(buf: Rollout, config: Config) -> dict[str, torch.Tensor]:
-    """GAE(lambda) advantages and returns of a rollout, flattened to its valid transitions.
-
-    Keys: ``obs``, ``act``, ``logp`` (of the acting policy), ``adv``, ``ret``.
-    """
-    adv, ret = gae(buf.rew, buf.val, buf.next_val, buf.term, buf.end, config.gamma, config.gae_lambda)
-    n = buf.valid.size
-    keep = buf.valid.reshape(-1).astype(bool)
-    return {"obs": torch.as_tensor(buf.obs.reshape(n, -1)[keep]),
-            "act": torch.as_tensor(buf.act.reshape(n, *buf.act.shape[2:])[keep]),
-            "logp": torch.as_tensor(buf.logp.reshape(-1)[keep]),
-            "adv": torch.as_tensor(adv.reshape(-1)[keep], dtype=torch.float32),
-            "ret": torch.as_tensor(ret.reshape(-1)[keep], dtype=torch.float32)}
+    """GAE(lambda) advantages and returns of a rollout, flattened to its valid transitions (:func:`valid_batch`)."""
+    adv, ret = gae(buf.rewards, buf.values, buf.next_values, buf.terminated, buf.episode_ends, config.gamma,
+                   config.gae_lambda)
+    return valid_batch(buf, adv, ret)
 
 
 UPDATE_STATS = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction")
@@ -287,6 +221,19 @@ class Result:
     steps: int
 
 
+UPDATE_COLUMNS = ["iteration", "step", "policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction",
+                  "kl_coef", "learning_rate"]
+"""The columns of a run's ``updates.csv``: one row per iteration."""
+
+
+def refuse_distributed(out: str | Path | None) -> None:
+    """A data-parallel run's folder is resumed by :mod:`rlcore.dppo`, not here."""
+    prior = RunDir(out).checkpoint if out is not None else None
+    if prior is not None and prior.exists() and load_checkpoint(prior).get("distributed"):
+        raise ValueError(f"{out} holds a data-parallel PPO run; resume it with `torchrun --nproc_per_node N -m "
+                         "rlcore.dppo ...` (see rlcore.dppo), or choose another --out folder.")
+
+
 def train(
     env_id: str,
     config: Config | None = None,
@@ -307,79 +254,29 @@ def train(
                          "(set explore_noise=0).")
     agent = make_agent(spaces, config)
     optimizer = make_optimizer(agent, config)
-    obs_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeObservation)
-    rew_norm = find_wrapper(envs, gym.wrappers.vector.NormalizeReward)
+    obs_rms, ret_rms = training_statistics(envs)
     eval_env = make_env(env_id, **config.env_kwargs)
-    n_envs, T = config.num_envs, config.n_steps
-    per_iter = T * n_envs
+    per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)
-    step = iteration = 0
-    kl_coef = config.kl_coef
-    returns: list[float] = []
-    end_steps: list[int] = []
-    evals: list[tuple[int, float]] = []
+    refuse_distributed(out)
+    run = Run("ppo", env_id, config, steps, seed, out, progress, desc=f"PPO-{config.objective} {env_id}",
+              target=iterations * per_iter, schedules=annealing(config), eval_at_end=True, close=(envs, eval_env),
+              evaluate=lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
+                                          config.eval_episodes, seed + 10_000),
+              logs={"updates": UPDATE_COLUMNS})
+    run.track(agent=agent, optimizer=optimizer, rng=rng, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
+              ret=running_stats(ret_rms, "ret"), spaces=spaces, obs_clip=OBS_CLIP)
+    step, iteration, kl_coef = run.resume(step=0, iteration=0, kl_coef=config.kl_coef)
+    buf = Rollout(spaces, config.n_steps, config.num_envs)
 
-    def policy() -> PPOPolicy:
-        mean = obs_norm.obs_rms.mean.copy() if obs_norm else None
-        var = obs_norm.obs_rms.var.copy() if obs_norm else None
-        return PPOPolicy(agent, mean, var, 10.0, spaces.get("low"), spaces.get("high"))
-
-    prior = RunDir(out).checkpoint if out is not None else None
-    if prior is not None and prior.exists() and load_checkpoint(prior).get("distributed"):
-        raise ValueError(f"{out} holds a data-parallel PPO run; resume it with `torchrun --nproc_per_node N -m "
-                         "rlcore.dppo ...` (see rlcore.dppo), or choose another --out folder.")
-    run, ckpt = open_run(out, "ppo", env_id, seed, steps, config,
-                         schedules="learning-rate annealing" if config.anneal_lr else None)
-    if ckpt is not None:
-        agent.load_state_dict(ckpt["agent"])
-        optimizer.load_state_dict(ckpt["optimizer"])
-        step, iteration, kl_coef = int(ckpt["step"]), int(ckpt["iteration"]), float(ckpt["kl_coef"])
-        rng.bit_generator.state = ckpt["rng"]
-        torch.set_rng_state(ckpt["torch_rng"])
-        if obs_norm is not None:
-            load_running_stats(obs_norm.obs_rms, ckpt, "obs")
-        if rew_norm is not None:
-            load_running_stats(rew_norm.return_rms, ckpt, "ret")
-    log = eval_log = None
-    if run is not None:
-        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length"])
-        eval_log = CSVLogger(run.root / "eval.csv", ["step", "mean_return", "std_return", "episodes"])
-        upd_log = CSVLogger(run.root / "updates.csv", ["iteration", "step", "policy_loss", "value_loss", "entropy",
-                                                       "approx_kl", "clip_fraction", "kl_coef", "learning_rate"])
-
-    def checkpoint() -> None:
-        if run is None:
-            return
-        state = {"algo": "ppo", "env_id": env_id, "seed": seed, "config": config_dict(config), "step": step,
-                 "iteration": iteration, "total_steps": steps, "complete": iteration >= iterations,
-                 "episode": len(returns), "agent": agent.state_dict(), "optimizer": optimizer.state_dict(),
-                 "kl_coef": kl_coef, "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
-                 "spaces": spaces, "obs_clip": 10.0}
-        if obs_norm is not None:
-            state.update(running_stats_state(obs_norm.obs_rms, "obs"))
-        else:
-            state.update(obs_mean=None, obs_var=None)
-        if rew_norm is not None:
-            state.update(running_stats_state(rew_norm.return_rms, "ret"))
-        save_checkpoint(run.checkpoint, state)
-
-    buf = Rollout(spaces, config)
-
-    def on_episode(t: int, episode_return: float, episode_length: int) -> None:
-        returns.append(episode_return)
-        end_steps.append(step + (t + 1) * n_envs)
-        if log is not None:
-            log.log(episode=len(returns), step=end_steps[-1], episode_return=returns[-1], episode_length=episode_length)
+    def on_episode(t: int, episode_return: float, length: int) -> None:  # an episode ended at rollout step t
+        run.record_episode(step + (t + 1) * config.num_envs, episode_return, length)
 
     obs, _ = envs.reset(seed=seed + 1_000 * iteration)
-    bar = tqdm(total=iterations * per_iter, initial=min(step, iterations * per_iter), disable=not progress,
-               unit="step", desc=f"PPO-{config.objective} {env_id}")
-    try:
+    with run:
         while iteration < iterations:
             # [ppo-loop]
-            lr = config.learning_rate * (1.0 - iteration / iterations if config.anneal_lr else 1.0)
-            for g in optimizer.param_groups:
-                g["lr"] = lr
+            lr = set_learning_rate(optimizer, config, iteration / iterations)
             # 1. run the policy for T steps in each environment
             obs = collect_rollout(agent, envs, obs, buf, on_episode, config.explore_noise * config.explore_decay ** step)
             step += per_iter
@@ -390,35 +287,12 @@ def train(
                                            config.kl_beta_high, config.kl_alpha)
             iteration += 1
             # [/ppo-loop]
-            if run is not None:
-                m = np.mean(stats, axis=0)
-                upd_log.log(iteration=iteration, step=step, policy_loss=m[0], value_loss=m[1], entropy=m[2],
-                            approx_kl=mean_kl, clip_fraction=m[4], kl_coef=kl_coef, learning_rate=lr)
-            crossed = lambda every: every and step // every > (step - per_iter) // every  # noqa: E731
-            if crossed(config.eval_every) or (config.eval_every and iteration == iterations):
-                r = evaluate_policy(policy(), eval_env, config.eval_episodes, seed=seed + 10_000)
-                agent.train()
-                evals.append((step, float(r.mean())))
-                if eval_log is not None:
-                    eval_log.log(step=step, mean_return=float(r.mean()), std_return=float(r.std()), episodes=len(r))
-            if crossed(config.checkpoint_every):
-                checkpoint()
-            bar.update(per_iter)
-            if returns:
-                bar.set_postfix(ret=f"{np.mean(returns[-10:]):.1f}", refresh=False)
-    except KeyboardInterrupt:
-        checkpoint()
-        raise
-    finally:
-        bar.close()
-        envs.close()
-        eval_env.close()
-        if run is not None:
-            for f in (log, eval_log, upd_log):
-                f.close()
-    checkpoint()
-    return Result(agent, policy(), np.array(returns), np.array(end_steps, dtype=int),
-                  np.array([e[0] for e in evals], dtype=int), np.array([e[1] for e in evals]), step)
+            m = np.mean(stats, axis=0)
+            run.log("updates", iteration=iteration, step=step, policy_loss=m[0], value_loss=m[1], entropy=m[2],
+                    approx_kl=mean_kl, clip_fraction=m[4], kl_coef=kl_coef, learning_rate=lr)
+            run.step_done(step, step - per_iter, iteration=iteration, kl_coef=kl_coef)
+    return Result(agent, deterministic_policy(agent, spaces, obs_rms), run.episode_returns, run.episode_end_steps,
+                  run.eval_steps, run.eval_returns, step)
 
 
 # --- what the command line needs ----------------------------------------------------------------

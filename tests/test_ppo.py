@@ -149,15 +149,15 @@ def test_explore_noise_widens_the_stored_actions_and_stores_their_log_probabilit
         agent.log_std.fill_(-5.0)  # the policy itself barely explores: std 0.007
     spread = {}
     for noise in (0.0, 0.5):
-        buf = ppo.Rollout(spaces, config)
+        buf = ppo.Rollout(spaces, config.n_steps, config.num_envs)
         obs, _ = envs.reset(seed=0)
         ppo.collect_rollout(agent, envs, obs, buf, explore_noise=noise)
         x = torch.as_tensor(buf.obs.reshape(400, -1))
         with torch.no_grad():
             mean = agent.actor(x)
-            logp = agent.log_prob(agent.distribution(x), torch.as_tensor(buf.act.reshape(400, -1)))
-        spread[noise] = float((torch.as_tensor(buf.act.reshape(400, -1)) - mean).std())
-        np.testing.assert_allclose(buf.logp.reshape(-1), logp.numpy(), rtol=1e-4, atol=1e-3)
+            logp = agent.log_prob(agent.distribution(x), torch.as_tensor(buf.actions.reshape(400, -1)))
+        spread[noise] = float((torch.as_tensor(buf.actions.reshape(400, -1)) - mean).std())
+        np.testing.assert_allclose(buf.log_probs.reshape(-1), logp.numpy(), rtol=1e-4, atol=1e-3)
     assert spread[0.0] < 0.02 and 0.4 < spread[0.5] < 0.6, spread
     with pytest.raises(ValueError, match="discrete"):
         train("CartPole-v1", Config(explore_noise=0.1, n_steps=64, batch_size=64), steps=64)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from rlcore import a2c, ppo
+from rlcore import a2c, onpolicy, ppo
 
 GAMMA = 0.5
 
@@ -67,15 +67,27 @@ ENV0_VALID = [1, 1, 1, 0, 1, 1]
 ENV1_VALID = [1, 1, 1, 1, 0, 1]
 
 
-def test_a2c_rollout_bootstraps_at_truncation_only_and_nothing_leaks_across_resets():
+SPACES = {"obs_dim": 2, "act_dim": 1, "discrete": True}
+
+
+def test_rollout_bootstraps_at_truncation_only_and_nothing_leaks_across_resets():
     envs, obs = make_envs()
-    r, obs, ended, _ = a2c.collect_rollout(FakeAgent(), envs, obs, np.zeros(2, bool), n_steps=6)
+    r = onpolicy.Rollout(SPACES, n_steps=6, num_envs=2)
+    onpolicy.collect_rollout(FakeAgent(), envs, obs, r)
     np.testing.assert_array_equal(r.valid[:, 0], ENV0_VALID)
     np.testing.assert_array_equal(r.valid[:, 1], ENV1_VALID)
     assert r.terminated[2, 0] and not r.truncated[2, 0]
     assert r.truncated[3, 1] and not r.terminated[3, 1]
+    assert r.episode_ends[2, 0] and r.episode_ends[3, 1] and r.episode_ends[3, 0]  # ends, and the reset step
     # where an episode ended, V(s_{t+1}) is that of its final observation (t = 3 or 4), not of the reset one
     assert r.next_values[2, 0] == V(3) and r.next_values[3, 1] == V(4)
+    assert r.next_values[1, 0] == V(2)  # mid-episode: V of the next step's observation
+
+
+def test_a2c_n_step_returns_of_a_rollout():
+    envs, obs = make_envs()
+    r = onpolicy.Rollout(SPACES, n_steps=6, num_envs=2)
+    onpolicy.collect_rollout(FakeAgent(), envs, obs, r)
     returns, _ = a2c.returns_and_advantages(r, GAMMA, gae_lambda=1.0)
     # env 0: G = 2 + 0.5 * 3 at index 1 and G = 3 at the terminal step: no bootstrap, no reward of the next episode
     assert returns[1, 0] == 2 + GAMMA * 3 and returns[2, 0] == 3
@@ -88,12 +100,15 @@ def test_a2c_rollout_bootstraps_at_truncation_only_and_nothing_leaks_across_rese
     assert returns[4, 0] == 1 + GAMMA * (2 + GAMMA * V(2))
 
 
-def test_a2c_ended_flag_carries_across_rollouts():
+def test_ended_flag_carries_across_rollouts():
     envs, obs = make_envs()
-    agent, ended = FakeAgent(), np.zeros(2, bool)
-    first, obs, ended, _ = a2c.collect_rollout(agent, envs, obs, ended, n_steps=3)  # env 0 terminates at its end
-    assert ended.tolist() == [True, False]
-    second, obs, ended, _ = a2c.collect_rollout(agent, envs, obs, ended, n_steps=3)
+    agent = FakeAgent()
+    first = onpolicy.Rollout(SPACES, n_steps=3, num_envs=2)
+    obs = onpolicy.collect_rollout(agent, envs, obs, first)  # env 0 terminates at the rollout's end
+    assert first.ended.tolist() == [True, False]
+    second = onpolicy.Rollout(SPACES, n_steps=3, num_envs=2)
+    second.ended = first.ended
+    onpolicy.collect_rollout(agent, envs, obs, second)
     np.testing.assert_array_equal(second.valid[:, 0], ENV0_VALID[3:])  # the reset step opens the next rollout
     np.testing.assert_array_equal(second.valid[:, 1], ENV1_VALID[3:])
     # and the rollout that ended with the terminal step did not bootstrap it
@@ -101,21 +116,21 @@ def test_a2c_ended_flag_carries_across_rollouts():
     assert returns[2, 0] == 3
 
 
-def _ppo_buffer(n_steps):
-    config = ppo.Config(num_envs=2, n_steps=n_steps, batch_size=2, gamma=GAMMA, gae_lambda=0.0,
-                        normalize_advantage=False)
-    return ppo.Rollout({"obs_dim": 2, "act_dim": 1, "discrete": True}, config), config
-
-
-def test_ppo_rollout_bootstraps_at_truncation_only_and_nothing_leaks_across_resets():
+def test_the_same_buffer_carries_the_ended_flag_into_its_next_rollout():
     envs, obs = make_envs()
-    buf, config = _ppo_buffer(6)
-    ppo.collect_rollout(FakeAgent(), envs, obs, buf)
-    np.testing.assert_array_equal(buf.valid[:, 0], ENV0_VALID)
-    np.testing.assert_array_equal(buf.valid[:, 1], ENV1_VALID)
-    assert buf.term[2, 0] == 1 and buf.end[2, 0] == 1
-    assert buf.term[3, 1] == 0 and buf.end[3, 1] == 1  # truncated: an end, not a terminal state
-    assert buf.next_val[2, 0] == V(3) and buf.next_val[3, 1] == V(4)
+    buf = onpolicy.Rollout(SPACES, n_steps=3, num_envs=2)
+    obs = onpolicy.collect_rollout(FakeAgent(), envs, obs, buf)
+    assert buf.ended.tolist() == [True, False]
+    onpolicy.collect_rollout(FakeAgent(), envs, obs, buf)
+    np.testing.assert_array_equal(buf.valid[:, 0], ENV0_VALID[3:])
+    np.testing.assert_array_equal(buf.valid[:, 1], ENV1_VALID[3:])
+
+
+def test_ppo_one_step_targets_of_a_rollout():
+    envs, obs = make_envs()
+    config = ppo.Config(num_envs=2, n_steps=6, batch_size=2, gamma=GAMMA, gae_lambda=0.0, normalize_advantage=False)
+    buf = onpolicy.Rollout(SPACES, config.n_steps, config.num_envs)
+    onpolicy.collect_rollout(FakeAgent(), envs, obs, buf)
     # with lambda = 0 each return is the one-step target r + gamma (1 - terminated) V(s_{t+1})
     batch = ppo.rollout_batch(buf, config)
     ret = {(t, i): v for (t, i), v in zip([(t, i) for t in range(6) for i in range(2)
@@ -125,13 +140,3 @@ def test_ppo_rollout_bootstraps_at_truncation_only_and_nothing_leaks_across_rese
     assert ret[(1, 0)] == 2 + GAMMA * V(2)  # mid-episode: V of the next step's observation (t = 2)
     assert ret[(4, 0)] == 1 + GAMMA * V(1)  # the next episode starts afresh from t = 0
     assert len(batch["ret"]) == sum(ENV0_VALID) + sum(ENV1_VALID)  # the reset steps are not learned from
-
-
-def test_ppo_ended_flag_carries_across_rollouts():
-    envs, obs = make_envs()
-    buf, _ = _ppo_buffer(3)
-    obs = ppo.collect_rollout(FakeAgent(), envs, obs, buf)
-    assert buf.ended.tolist() == [True, False]
-    ppo.collect_rollout(FakeAgent(), envs, obs, buf)
-    np.testing.assert_array_equal(buf.valid[:, 0], ENV0_VALID[3:])
-    np.testing.assert_array_equal(buf.valid[:, 1], ENV1_VALID[3:])
