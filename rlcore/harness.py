@@ -115,6 +115,7 @@ class Run:
         self.episode = 0
         """Episodes ended so far, over every resume (the ``episode`` column of the per-episode log)."""
         self.returns: list[float] = []
+        self.lengths: list[int] = []
         self.end_steps: list[int] = []
         self.evals: list[dict[str, float]] = []
         self.logs: dict[str, CSVLogger] = {}
@@ -188,7 +189,10 @@ class Run:
     def record_episode(self, step: int, episode_return: float, length: int, **columns: Any) -> None:
         """An episode ended at ``step``: keep its return, log it (``episode`` counts from 1), show it."""
         self.episode += 1
+        if "episode" in self.counters:
+            self.counters["episode"] = self.episode
         self.returns.append(float(episode_return))
+        self.lengths.append(int(length))
         self.end_steps.append(int(step))
         if self.episode_log is not None:
             self.log(self.episode_log, episode=self.episode, step=step,
@@ -251,6 +255,10 @@ class Run:
     @property
     def episode_returns(self) -> np.ndarray:
         return np.array(self.returns)
+
+    @property
+    def episode_lengths(self) -> np.ndarray:
+        return np.array(self.lengths, dtype=int)
 
     @property
     def episode_end_steps(self) -> np.ndarray:

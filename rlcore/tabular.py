@@ -18,13 +18,11 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from tqdm import tqdm
 
-from rlcore.checkpoint import save_checkpoint
 from rlcore.config import check_budget, check_config
 from rlcore.envs import make_env
-from rlcore.logger import CSVLogger
-from rlcore.runs import config_dict, episode_seed, open_run
+from rlcore.harness import EPISODE_COLUMNS, Run, Saved
+from rlcore.runs import episode_seed
 from rlcore.schedules import linear_schedule
 
 METHODS = ("q-learning", "sarsa")
@@ -187,13 +185,12 @@ class Result:
     steps: int
 
 
-def _state(env_id: str, config: Config, seed: int, step: int, episode: int, Q: np.ndarray,
-           rng: np.random.Generator, total_steps: int) -> dict[str, Any]:
-    return {
-        "algo": config.method, "env_id": env_id, "config": config_dict(config), "seed": seed,
-        "step": step, "episode": episode, "total_steps": total_steps, "complete": step >= total_steps,
-        "q": Q, "rng": rng.bit_generator.state,
-    }
+def q_table(Q: np.ndarray) -> Saved:
+    """The Q-table in a checkpoint, under ``q`` (restored in place)."""
+    def load(ckpt: dict[str, Any]) -> None:
+        Q[...] = ckpt["q"].numpy()
+
+    return Saved(lambda: {"q": Q}, load)
 
 
 def train(
@@ -217,26 +214,11 @@ def train(
     n_states, n_actions = check_spaces(env, env_id)
     rng = np.random.default_rng(seed)
     Q = np.zeros((n_states, n_actions))
-    step = episode = 0
-    returns: list[float] = []
-    lengths: list[int] = []
-    end_steps: list[int] = []
-    run, ckpt = open_run(out, config.method, env_id, seed, steps, config)
-    if ckpt is not None:
-        Q = ckpt["q"].numpy().copy()
-        step, episode = int(ckpt["step"]), int(ckpt["episode"])
-        rng.bit_generator.state = ckpt["rng"]
-    log = None
-    if run is not None:
-        log = CSVLogger(run.progress, ["episode", "step", "episode_return", "episode_length", "epsilon"])
-
-    def checkpoint() -> None:
-        if run is not None:
-            save_checkpoint(run.checkpoint, _state(env_id, config, seed, step, episode, Q, rng, steps))
-
-    bar = tqdm(total=steps, initial=min(step, steps), disable=not progress, unit="step",
-               desc=f"{config.method} {env_id}")
-    try:
+    run = Run(config.method, env_id, config, steps, seed, out, progress, desc=f"{config.method} {env_id}",
+              close=(env,), episode_log=EPISODE_COLUMNS + ["epsilon"])
+    run.track(q=q_table(Q), rng=rng)
+    step, episode = run.resume(step=0, episode=0)
+    with run:
         while step < steps:
             s, _ = env.reset(seed=episode_seed(seed, episode))
             epsilon = linear_schedule(config.epsilon_start, config.epsilon_end, config.epsilon_decay_steps, step)
@@ -255,28 +237,11 @@ def train(
                 ep_return += float(r)
                 ep_len += 1
                 done = terminated or truncated
-                bar.update(1)
-                if run is not None and step % config.checkpoint_every == 0:
-                    checkpoint()
+                run.step_done(step, step - 1)
             if done:
                 episode += 1
-                returns.append(ep_return)
-                lengths.append(ep_len)
-                end_steps.append(step)
-                if log is not None:
-                    log.log(episode=episode, step=step, episode_return=ep_return,
-                            episode_length=ep_len, epsilon=epsilon)
-                bar.set_postfix(ret=f"{ep_return:.1f}", eps=f"{epsilon:.2f}", refresh=False)
-    except KeyboardInterrupt:
-        checkpoint()
-        raise
-    finally:
-        bar.close()
-        env.close()
-        if log is not None:
-            log.close()
-    checkpoint()
-    return Result(Q, np.array(returns), np.array(lengths, dtype=int), np.array(end_steps, dtype=int), step)
+                run.record_episode(step, ep_return, ep_len, epsilon=epsilon)
+    return Result(Q, run.episode_returns, run.episode_lengths, run.episode_end_steps, step)
 
 
 # --- what the command line needs ----------------------------------------------------------------
