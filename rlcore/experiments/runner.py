@@ -9,7 +9,6 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -47,11 +46,9 @@ def distributed_command(spec: RunSpec, seed: int, out: str | os.PathLike) -> lis
     """
     if spec.algo != "dppo":
         raise ValueError(f"{spec.name}: only dppo runs are started by torchrun, not {spec.algo!r}")
-    from rlcore.cli import set_args
+    from rlcore.launch import torchrun_command
 
-    return [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc_per_node={spec.workers}",
-            "-m", "rlcore.dppo", "--env", spec.env_id, "--steps", str(spec.steps), "--seed", str(seed),
-            "--out", str(out), "--no-progress", *set_args(spec.overrides)]
+    return torchrun_command(spec.workers, spec.env_id, spec.steps, seed, out, spec.overrides)
 
 
 def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:

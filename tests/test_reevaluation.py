@@ -1,0 +1,75 @@
+"""rlcore.experiments.reevaluation: a run's final policies evaluated again, the clipping-fix check, and one policy
+run three ways."""
+
+import numpy as np
+import pytest
+import torch
+
+from rlcore import experiments as ex
+from rlcore.checkpoint import load_checkpoint, save_checkpoint
+from rlcore.experiments.reevaluation import (action_clipping_returns, final_policy_returns,
+                                             trained_before_clipping_fix)
+from rlcore.ppo import Config, train
+
+
+@pytest.fixture(scope="module")
+def tiny_ppo(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("reeval")
+    exp = ex.Experiment("tiny-ppo", "two seeds of a tiny PPO on Pendulum", (
+        ex.RunSpec("ppo", "ppo", "Pendulum-v1", 256, (0, 1),
+                   {"num_envs": 1, "n_steps": 128, "batch_size": 64, "n_epochs": 1, "eval_every": 128,
+                    "eval_episodes": 2}),))
+    mp = pytest.MonkeyPatch()
+    mp.setitem(ex.EXPERIMENTS, "tiny-ppo", lambda: exp)
+    ex.run_experiment("tiny-ppo", results=tmp / "results", work=tmp / "runs")
+    yield ex.load_experiment("tiny-ppo", tmp / "results")["ppo"]
+    mp.undo()
+
+
+def test_final_policies_evaluated_again_reproduce_the_last_logged_evaluation(tiny_ppo):
+    finals = final_policy_returns(tiny_ppo, episodes=2)
+    assert finals.shape == (2,)
+    # same policy, same start states (seed + 10,000 + i), same machine: the same returns as eval.csv's last row
+    np.testing.assert_allclose(finals, ex.final_returns(tiny_ppo), rtol=1e-9)
+    assert final_policy_returns(tiny_ppo, episodes=2) is finals           # computed once
+    assert not np.array_equal(final_policy_returns(tiny_ppo, episodes=1), finals)
+
+
+def test_a_policy_saved_with_infinite_action_bounds_was_trained_before_the_fix(tiny_ppo):
+    assert not trained_before_clipping_fix(tiny_ppo).any()
+    path = tiny_ppo.seeds[1].folder / "policy.pt"
+    ckpt = load_checkpoint(path)
+    ckpt["spaces"]["low"] = np.full_like(ckpt["spaces"]["low"], -np.inf)
+    ckpt["spaces"]["high"] = np.full_like(ckpt["spaces"]["high"], np.inf)
+    save_checkpoint(path, {k: v for k, v in ckpt.items() if k not in ("format", "format_version")})
+    assert trained_before_clipping_fix(tiny_ppo).tolist() == [False, True]
+
+
+def _policy(env_id, scale):
+    """An untrained PPO policy on env_id whose mean actions are the network's times ``scale``."""
+    policy = train(env_id, Config(num_envs=1, n_steps=64, batch_size=64, n_epochs=1, eval_every=0), 64,
+                   seed=0).policy
+    with torch.no_grad():
+        for p in policy.agent.actor[-1].parameters():
+            p.mul_(scale)
+    return policy
+
+
+def test_three_ways_on_pendulum_which_clips_the_torque_before_its_cost():
+    policy = _policy("Pendulum-v1", 1_000.0)
+    out = action_clipping_returns(policy, "Pendulum-v1", episodes=1)
+    assert 0 < out["outside"] <= 1                             # the scaled means leave [-2, 2]
+    assert out["clipped"] == pytest.approx(out["unclipped"], rel=1e-6)   # Pendulum clips before charging
+    from rlcore.envs import make_env
+    from rlcore.evaluate import evaluate_policy
+
+    assert out["clipped"] == evaluate_policy(policy, make_env("Pendulum-v1"), 1, seed=20_000)[0]
+    assert out["sampled"] != out["clipped"]
+
+
+def test_three_ways_on_halfcheetah_which_charges_the_unclipped_action():
+    out = action_clipping_returns(_policy("HalfCheetah-v5", 1_000.0), "HalfCheetah-v5", episodes=1)
+    assert out["outside"] > 0.5
+    assert out["unclipped"] < out["clipped"] - 1_000            # 0.1 sum a^2 on huge actions, 1,000 steps
+    small = action_clipping_returns(_policy("HalfCheetah-v5", 1e-3), "HalfCheetah-v5", episodes=1)
+    assert small["outside"] == 0 and small["clipped"] == pytest.approx(small["unclipped"], rel=1e-6)
