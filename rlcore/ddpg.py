@@ -197,11 +197,43 @@ class Result:
     """The final deterministic policy, with the observation statistics when normalize_obs."""
 
 
+def make_envs(env_id: str, config: Config, seed: int) -> tuple[gym.Env, gym.Env, dict[str, Any]]:
+    """The training environment (its rewards scaled by ``reward_scale`` for learning), the evaluation one (raw
+    rewards), and the spaces."""
+    # [ddpg-env]
+    env = make_env(env_id, seed=seed, **config.env_kwargs)
+    sp = check_spaces(env, env_id)
+    if config.reward_scale != 1.0:
+        env = gym.wrappers.TransformReward(env, lambda r: config.reward_scale * r)
+    # [/ddpg-env]
+    return env, make_env(env_id, **config.env_kwargs), sp
+
+
 def make_networks(sp: dict[str, Any], config: Config) -> tuple[Actor, Critic, Actor, Critic]:
     """Actor mu, critic Q, and their targets mu', Q' as copies."""
     actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
     critic = Critic(sp["obs_dim"], sp["act_dim"], config.hidden)
     return actor, critic, copy.deepcopy(actor), copy.deepcopy(critic)
+
+
+def make_optimizers(actor: Actor, critic: Critic, config: Config) -> tuple[torch.optim.Adam, torch.optim.Adam]:
+    """One Adam for the actor, one for the critic (fused: one kernel per step instead of a few per tensor)."""
+    return (torch.optim.Adam(actor.parameters(), lr=config.actor_lr, fused=True),
+            torch.optim.Adam(critic.parameters(), lr=config.critic_lr, fused=True))
+
+
+def first_behaviour(actor: Actor, param_noise: AdaptiveParamNoise | None) -> nn.Module:
+    """The network that acts first: the actor, or with parameter noise the perturbed actor a checkpoint restored
+    (or a fresh perturbation)."""
+    if param_noise is None:
+        return actor
+    return param_noise.perturbed if param_noise.perturbed is not None else param_noise.perturb(actor)
+
+
+def saved_policy(actor: Actor, scaler: ObservationScaler | None) -> DeterministicPolicy:
+    """The deterministic policy now, with a copy of the observation statistics (normalize_obs)."""
+    stats = () if scaler is None else (scaler.rms.mean.copy(), scaler.rms.var.copy())
+    return DeterministicPolicy(actor, *stats)
 
 
 def make_exploration(config: Config, act_dim: int, seed: int) -> tuple[Any, AdaptiveParamNoise | None]:
@@ -247,18 +279,11 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     config = config or Config()
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    # [ddpg-env]
-    env = make_env(env_id, seed=seed, **config.env_kwargs)
-    sp = check_spaces(env, env_id)
-    if config.reward_scale != 1.0:
-        env = gym.wrappers.TransformReward(env, lambda r: config.reward_scale * r)
-    # [/ddpg-env]
-    eval_env = make_env(env_id, **config.env_kwargs)
+    env, eval_env, sp = make_envs(env_id, config, seed)
     low, high = np.array(sp["low"]), np.array(sp["high"])
     half = (high - low) / 2
     actor, critic, actor_t, critic_t = make_networks(sp, config)
-    actor_opt = torch.optim.Adam(actor.parameters(), lr=config.actor_lr, fused=True)
-    critic_opt = torch.optim.Adam(critic.parameters(), lr=config.critic_lr, fused=True)
+    actor_opt, critic_opt = make_optimizers(actor, critic, config)
     buffer = ReplayBuffer(config.buffer_size, (sp["obs_dim"],), (sp["act_dim"],), np.float32, seed=seed)
     noise, param_noise = make_exploration(config, sp["act_dim"], seed)
     # [ddpg-normalize]
@@ -269,12 +294,8 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         return torch.as_tensor(x, dtype=torch.float32) if scaler is None else scaler.scale(x)
     # [/ddpg-normalize]
 
-    def policy() -> DeterministicPolicy:
-        stats = () if scaler is None else (scaler.rms.mean.copy(), scaler.rms.var.copy())
-        return DeterministicPolicy(actor, *stats)
-
     run = Run("ddpg", env_id, config, steps, seed, out, progress, desc=f"DDPG {env_id}", close=(env, eval_env),
-              evaluate=lambda: evaluation(policy(), eval_env, config.eval_episodes, seed + 10_000),
+              evaluate=lambda: evaluation(saved_policy(actor, scaler), eval_env, config.eval_episodes, seed + 10_000),
               episode_log=EPISODE_COLUMNS + ["noise_sigma"])
     run.track(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
               critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
@@ -282,9 +303,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
               obs=running_stats(scaler.rms, "obs", scaler.loaded) if scaler is not None else None)
     step, episode = run.resume(step=0, episode=0)
     obs, _ = env.reset(seed=episode_seed(seed, episode))
-    behaviour = actor  # with parameter noise: the perturbed actor a checkpoint restored, or a fresh one
-    if param_noise is not None:
-        behaviour = param_noise.perturbed if param_noise.perturbed is not None else param_noise.perturb(actor)
+    behaviour = first_behaviour(actor, param_noise)
     with run:
         while step < steps:
             # [ddpg-act]
@@ -329,7 +348,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
             # [/ddpg-learn]
             run.step_done(step, step - 1, episode=episode)
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns,
-                  step, policy())
+                  step, saved_policy(actor, scaler))
 
 
 def make_config(algo: str, **overrides: Any) -> Config:

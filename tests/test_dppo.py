@@ -12,7 +12,7 @@ import pytest
 import torch
 from gymnasium.wrappers.utils import RunningMeanStd
 
-from rlcore import dppo, ppo
+from rlcore import distributed, dppo, ppo
 from rlcore.checkpoint import load_checkpoint
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
@@ -128,7 +128,7 @@ def test_merged_statistics_are_those_of_all_the_data():
     rng = np.random.default_rng(0)
     base = RunningMeanStd(shape=(3,))
     base.update(rng.normal(5.0, 2.0, (50, 3)))
-    start = dppo.snapshot(base)
+    start = distributed.snapshot(base)
     data = [rng.normal(5.5, 3.0, (40, 3)), rng.normal(4.0, 1.0, (70, 3))]  # two workers' new observations
     contributions = []
     for x in data:
@@ -136,8 +136,8 @@ def test_merged_statistics_are_those_of_all_the_data():
         w.mean, w.var, w.count = start[0].copy(), start[1].copy(), start[2]
         for chunk in np.array_split(x, 4):
             w.update(chunk)
-        contributions.append(dppo.stats_contribution(w, start))
-    mean, var, count = dppo.merge_contributions(start, np.sum(contributions, axis=0))
+        contributions.append(distributed.stats_contribution(w, start))
+    mean, var, count = distributed.merge_contributions(start, np.sum(contributions, axis=0))
     one = RunningMeanStd(shape=(3,))
     one.mean, one.var, one.count = start[0].copy(), start[1].copy(), start[2]
     one.update(np.concatenate(data))
@@ -151,7 +151,7 @@ def test_half_a_torchrun_environment_is_a_clear_error(monkeypatch):
     monkeypatch.setenv("WORLD_SIZE", "2")
     monkeypatch.delenv("MASTER_ADDR", raising=False)
     with pytest.raises(ValueError, match="MASTER_ADDR.*torchrun --nproc_per_node"):
-        dppo.init_distributed()
+        distributed.init_distributed()
 
 
 def test_sharing_rollouts_keeps_the_workers_identical(tmp_path):
@@ -173,7 +173,7 @@ def _gather_worker(rank: int, store_file: str, out_dir: str) -> None:
     torch.distributed.init_process_group("gloo", init_method=f"file://{store_file}", rank=rank, world_size=2)
     n = 3 + 2 * rank  # the workers' rollouts differ in length (reset steps are dropped)
     mine = {"obs": torch.full((n, 2), float(rank)), "adv": torch.arange(n, dtype=torch.float32) + 10 * rank}
-    merged = dppo.gather_rollouts(mine)
+    merged = distributed.gather_rollouts(mine)
     torch.save(merged, Path(out_dir) / f"rank{rank}.pt")
     torch.distributed.destroy_process_group()
 
