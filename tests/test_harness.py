@@ -1,0 +1,141 @@
+"""rlcore.harness.Run: what every train's loop relies on, tested on a toy loop without an algorithm."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+import torch
+
+import rlcore.harness as harness
+from rlcore.checkpoint import load_checkpoint
+from rlcore.harness import Run, Saved, crossed, running_stats, torch_rng
+from rlcore.logger import read_csv
+
+
+@dataclass
+class ToyConfig:
+    lr: float = 0.1
+    eval_every: int = 4
+    checkpoint_every: int = 5
+    env_kwargs: dict = field(default_factory=dict)
+
+
+class Closable:
+    closed = False
+
+    def close(self):
+        self.closed = True
+
+
+def toy_run(out, steps=10, interrupt_at=None, evaluate=True, **kw):
+    """A loop that 'learns' one weight, ends an 'episode' every 3 steps and is evaluated and checkpointed."""
+    torch.manual_seed(0)
+    net = torch.nn.Linear(1, 1)
+    opt = torch.optim.SGD(net.parameters(), lr=0.1)
+    rng = np.random.default_rng(0)
+    box = Closable()
+    run = Run("toy", "Toy-v0", ToyConfig(), steps, 0, out, close=(box,), desc="toy",
+              evaluate=(lambda: {"mean_return": float(net.weight.item()), "std_return": 0.0, "episodes": 1})
+              if evaluate else None, **kw)
+    run.track(net=net, opt=opt, rng=rng, torch_rng=torch_rng(), spaces={"n": 1}, nothing=None)
+    step, episode = run.resume(step=0, episode=0)
+    with run:
+        while step < steps:
+            loss = (net(torch.ones(1)) - rng.normal()).pow(2).sum()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            step += 1
+            if interrupt_at == step:
+                raise KeyboardInterrupt
+            if step % 3 == 0:
+                episode += 1
+                run.record_episode(step, float(step), 3)
+            run.step_done(step, step - 1, episode=episode)
+    return run, net, box
+
+
+def test_an_interrupted_run_resumes_to_exactly_the_uninterrupted_one(tmp_path):
+    whole, net_whole, _ = toy_run(tmp_path / "whole")
+    with pytest.raises(KeyboardInterrupt):
+        toy_run(tmp_path / "cut", interrupt_at=8)
+    ckpt = load_checkpoint(tmp_path / "cut" / "checkpoint.pt")
+    # the checkpoint counts the 7 steps completed; the constants and the tracked state are in it, None is not
+    assert ckpt["step"] == 7 and ckpt["episode"] == 2 and not ckpt["complete"]
+    assert ckpt["spaces"] == {"n": 1} and "nothing" not in ckpt and {"net", "opt", "rng", "torch_rng"} <= set(ckpt)
+    # the resumed run finishes the budget, its log has every episode once
+    resumed, _, _ = toy_run(tmp_path / "cut")
+    assert resumed.episode_end_steps.tolist() == [9] and load_checkpoint(tmp_path / "cut" / "checkpoint.pt")["complete"]
+    assert read_csv(tmp_path / "cut" / "progress.csv")["step"].tolist() == [3, 6, 9]
+    # one resumed from a periodic checkpoint (step 5, taken after the step's work) is the uninterrupted run
+    with pytest.raises(KeyboardInterrupt):
+        toy_run(tmp_path / "exact", interrupt_at=6)
+    assert load_checkpoint(tmp_path / "exact" / "checkpoint.pt")["step"] == 5
+    again, net_again, _ = toy_run(tmp_path / "exact")
+    assert torch.equal(net_whole.weight, net_again.weight) and torch.equal(net_whole.bias, net_again.bias)
+    log = read_csv(tmp_path / "exact" / "progress.csv")
+    assert log["episode"].tolist() == [1, 2, 3] and log["step"].tolist() == [3, 6, 9]  # no row twice
+    assert read_csv(tmp_path / "exact" / "eval.csv")["step"].tolist() == [4, 8]
+
+
+def test_evaluations_checkpoints_and_the_end(tmp_path, monkeypatch):
+    saved = []
+    real = harness.save_checkpoint
+    monkeypatch.setattr(harness, "save_checkpoint", lambda path, state: (saved.append(state["step"]), real(path, state)))
+    run, net, box = toy_run(tmp_path, steps=10)
+    assert saved == [5, 10]  # every checkpoint_every steps, and at the end
+    assert run.eval_steps.tolist() == [4, 8] and run.eval_returns.shape == (2,)
+    assert run.episode_returns.tolist() == [3.0, 6.0, 9.0] and run.episode_end_steps.tolist() == [3, 6, 9]
+    assert run.episode_lengths.tolist() == [3, 3, 3]
+    assert box.closed and load_checkpoint(tmp_path / "checkpoint.pt")["complete"]
+    saved.clear()
+    toy_run(tmp_path / "twelve", steps=15)
+    assert saved == [5, 10, 15]  # the end coincides with a periodic checkpoint: written once
+
+
+def test_eval_at_end_and_a_target_beyond_the_budget(tmp_path):
+    run, _, _ = toy_run(tmp_path, steps=10, target=10, eval_at_end=True)
+    assert run.eval_steps.tolist() == [4, 8, 10]
+
+
+def test_without_a_folder_nothing_is_written_and_the_loop_still_runs(tmp_path):
+    run, _, box = toy_run(None, steps=6)
+    assert run.folder is None and run.ckpt is None and box.closed
+    assert run.eval_steps.tolist() == [4] and list(tmp_path.iterdir()) == []
+
+
+def test_another_run_in_the_folder_is_refused(tmp_path):
+    toy_run(tmp_path, steps=4)
+    with pytest.raises(ValueError, match="other settings"):
+        Run("toy", "Toy-v0", ToyConfig(lr=0.5), 4, 0, tmp_path, desc="toy")
+
+
+def test_saved_pairs_and_running_statistics_round_trip(tmp_path):
+    from gymnasium.wrappers.utils import RunningMeanStd
+
+    rms = RunningMeanStd(shape=(2,))
+    rms.update(np.array([[1.0, 2.0], [3.0, 6.0]]))
+    table = np.arange(4.0)
+    loaded = []
+    run = Run("toy", "Toy-v0", ToyConfig(), 3, 0, tmp_path, desc="toy")
+    run.track(table=Saved(lambda: {"table": table}, lambda c: table.__setitem__(..., c["table"].numpy())),
+              obs=running_stats(rms, "obs", lambda: loaded.append(True)), ret=running_stats(None, "ret"))
+    run.resume(step=3)
+    with run:
+        pass
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
+    assert ckpt["ret_mean"] is None and ckpt["obs_count"] == pytest.approx(rms.count)
+    table[:] = 0
+    rms.mean[:] = 0
+    again = Run("toy", "Toy-v0", ToyConfig(), 3, 0, tmp_path, desc="toy")
+    again.track(table=Saved(lambda: {"table": table}, lambda c: table.__setitem__(..., c["table"].numpy())),
+                obs=running_stats(rms, "obs", lambda: loaded.append(True)))
+    assert again.resume(step=0) == 3
+    assert table.tolist() == [0.0, 1.0, 2.0, 3.0] and rms.mean.tolist() == pytest.approx([2.0, 4.0], rel=1e-3)
+    assert loaded == [True]
+
+
+def test_crossed():
+    assert crossed(4, 4, 3) and crossed(4, 9, 7) and not crossed(4, 7, 4) and not crossed(0, 8, 0)
