@@ -80,3 +80,14 @@ def test_page_runs_loads_each_run_once_and_says_where_it_comes_from(small, monke
     assert runs.complete("base") and not runs.complete("base", "wide")  # every seed, from results/
     text = runs.describe(runs["wide"])
     assert "{warning}" in text and "short live run" in text and runs.command in text
+
+
+def test_page_runs_without_live_fallback_shows_what_results_has_and_says_what_is_missing(small, monkeypatch):
+    stored = _results()
+    stored["wide"] = ex.RunResults(SPECS[1], [], [0, 1])
+    monkeypatch.setattr(pages, "load_experiment", lambda name: stored)
+    monkeypatch.setattr(pages, "load_or_train", lambda *a, **k: pytest.fail("no live run without the fallback"))
+    runs = PageRuns("small", fallback_steps=40, fallback_seeds=[5], live_fallback=False)
+    assert runs["base"] is stored["base"] and runs.complete("base") and not runs["wide"].seeds
+    text = runs.describe(runs["wide"])
+    assert text.startswith(":::{warning}") and "holds none of its 2 seeds" in text and "*Wide*" in text

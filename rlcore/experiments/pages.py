@@ -22,8 +22,9 @@ class PageRuns:
 
     ``runs[run]`` loads run ``run`` on first use: every seed that ``results/`` holds, or, if it holds none, a
     short live stand-in of ``fallback_steps`` steps for each of ``fallback_seeds``, evaluated ``eval_points``
-    times (see :func:`rlcore.experiments.load_or_train`). ``labels`` gives short legend labels by run name
-    (default: the registry's label).
+    times (see :func:`rlcore.experiments.load_or_train`). With ``live_fallback=False`` (for runs too long to
+    train while a page builds) a run missing from ``results/`` stays empty, and :meth:`describe` says so.
+    ``labels`` gives short legend labels by run name (default: the registry's label).
     """
 
     name: str
@@ -31,6 +32,7 @@ class PageRuns:
     fallback_seeds: list[int]
     eval_points: int = 10
     labels: dict[str, str] = field(default_factory=dict)
+    live_fallback: bool = True
     _loaded: dict[str, RunResults] = field(default_factory=dict, repr=False)
 
     @property
@@ -44,8 +46,11 @@ class PageRuns:
 
     def __getitem__(self, run: str) -> RunResults:
         if run not in self._loaded:
-            self._loaded[run] = load_or_train(self.name, run, self.fallback_steps, self.fallback_seeds,
-                                              eval_points=self.eval_points)
+            if self.live_fallback:
+                self._loaded[run] = load_or_train(self.name, run, self.fallback_steps, self.fallback_seeds,
+                                                  eval_points=self.eval_points)
+            else:
+                self._loaded[run] = load_experiment(self.name)[run]
         return self._loaded[run]
 
     def legend(self, run: RunResults) -> str:
@@ -55,8 +60,14 @@ class PageRuns:
 
     def describe(self, *runs: RunResults) -> str:
         """What to show under a figure of ``runs``: their provenance, folded (see
-        :func:`rlcore.experiments.provenance_markdown`); a live stand-in or missing seeds stay visible."""
-        return "\n".join(provenance_markdown(self.name, run, self.command) for run in runs)
+        :func:`rlcore.experiments.provenance_markdown`); a live stand-in, missing seeds, or a run with no seed at
+        all stay visible."""
+        return "\n".join(self._missing(run) if not run.seeds and run.source == "results"
+                         else provenance_markdown(self.name, run, self.command) for run in runs)
+
+    def _missing(self, run: RunResults) -> str:
+        return (f":::{{warning}}\n`results/{self.name}/{run.name}/` holds none of its {len(run.spec.seeds)} seeds, "
+                f"so *{self.legend(run)}* is not shown in this build. Run `{self.command}` to make it.\n:::\n")
 
     def complete(self, *runs: str) -> bool:
         """Whether every named run comes from ``results/`` with all of its registry's seeds: the condition under
