@@ -12,6 +12,16 @@ rollouts and each takes the same minibatch steps on all of them, with no communi
 (:attr:`Config.share`). The learning is the same in distribution; the communication is one message per
 update instead of one per minibatch, paid for by computing every gradient step on every worker.
 
+The loop of every worker, in lockstep with the others (:func:`_train`)::
+
+    for each update:
+        run the policy in this worker's num_envs environments for n_steps steps
+        merge the observation and return statistics of all workers
+        GAE(lambda) advantages on this worker's rollout
+        for n_epochs epochs, over minibatches (the same number on every worker):
+            one Adam step on the PPO loss, its gradient averaged over the workers
+        (kl) adapt beta from the KL averaged over the workers
+
 One machine, 2 workers (``--steps`` is the total over all workers)::
 
     torchrun --nproc_per_node 2 -m rlcore.dppo --env HalfCheetah-v5 --steps 1000000 --out runs/dppo-hc

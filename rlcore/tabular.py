@@ -7,7 +7,15 @@ toward a *TD target*; they differ only in which next action the target uses:
 - SARSA (on-policy):        y = r + gamma * Q[s', a'],  a' the action actually taken next
 
 At a terminal state there is no future, so y = r. A time limit (truncation) is *not* terminal: the
-target still bootstraps from s'.
+target still bootstraps from s'. The loop of :func:`train`:
+
+    for each episode:
+        s = reset();  a = epsilon-greedy(Q[s])
+        until the episode ends:
+            take a, observe r, s'
+            a' = epsilon-greedy(Q[s'])                          (epsilon decays linearly with the step)
+            Q[s, a] <- Q[s, a] + alpha (y - Q[s, a])            (y: Q-learning's or SARSA's target)
+            s, a <- s', a'
 """
 
 from __future__ import annotations
