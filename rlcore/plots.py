@@ -102,6 +102,46 @@ def plot_learning_curves(
     return ax
 
 
+def plot_seed_scores(
+    scores: Mapping[str, Sequence[float]],
+    intervals: Mapping[str, tuple[float, float, float]] | None = None,
+    ax=None,
+    ylabel: str = "score",
+    title: str | None = None,
+    estimate: str = "IQM",
+):
+    """One column per arm: every seed's score as a dot, and the arm's estimate with its interval as a bar.
+
+    ``scores[arm]`` holds one score per seed; ``intervals[arm]`` is ``(estimate, low, high)``, for instance from
+    :func:`rlcore.experiments.analysis.iqm_ci` (no bar without it). Arm ``i`` is drawn in colour ``Ci``, as the
+    ``i``-th curve of :func:`plot_learning_curves`. With 3 to 5 seeds the dots show what a summary hides: a seed
+    that failed, or one that got lucky. Returns the matplotlib ``Axes``.
+    """
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(1.7 * len(scores) + 1.5, 3.6))
+    for i, (arm, values) in enumerate(scores.items()):
+        values = np.asarray(values, dtype=float)
+        offsets = np.linspace(-0.12, 0.12, len(values)) if len(values) > 1 else np.zeros(len(values))
+        ax.scatter(i + offsets, values, color=f"C{i}", alpha=0.75, s=24, zorder=3,
+                   label="one seed" if i == 0 else None)
+        if intervals is not None and arm in intervals:
+            point, lo, hi = intervals[arm]
+            ax.plot([i - 0.28, i + 0.28], [point, point], color="k", lw=2, zorder=4,
+                    label=estimate if i == 0 else None)
+            ax.vlines(i + 0.3, lo, hi, color="k", lw=1.5, zorder=4,
+                      label="95 % interval" if i == 0 else None)
+    ax.set_xticks(range(len(scores)), list(scores))
+    ax.set_xlim(-0.6, len(scores) - 0.4)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title)
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=8)
+    return ax
+
+
 def plot_scaling(record: Mapping, axes=None):
     """Two panels from ``benchmarks/dppo_scaling.py``'s record: speed-up against workers per way of sharing
     (with the linear ideal), and each run's training return against all workers' env-steps. Returns the axes."""
