@@ -143,8 +143,13 @@ def command_line() -> str | None:
     """How this process was started, as a user would type it (``python -m rlcore ...`` for the CLI)."""
     if not sys.argv or not sys.argv[0]:
         return None
-    prog = Path(sys.argv[0])
-    head = ["python", "-m", "rlcore"] if prog.name == "__main__.py" and prog.parent.name == "rlcore" else [prog.name]
+    prog = Path(sys.argv[0]).resolve()
+    package = Path(__file__).resolve().parent
+    if prog.is_relative_to(package):  # python -m rlcore, python -m rlcore.experiments.versus, ...
+        module = ".".join(("rlcore", *prog.relative_to(package).with_suffix("").parts))
+        head = ["python", "-m", module.removesuffix(".__main__")]
+    else:
+        head = [prog.name]
     return shlex.join([*head, *sys.argv[1:]])
 
 
