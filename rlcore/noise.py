@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 
+# [gaussian-noise]
 class GaussianNoise:
     """a + N(0, sigma^2), sigma <- sigma * decay after every sample."""
 
@@ -34,6 +35,7 @@ class GaussianNoise:
     def reset(self) -> None:
         pass
 
+    # [/gaussian-noise]
     def state_dict(self) -> dict:
         """What a checkpoint needs to continue the same noise sequence: sigma and the generator's state."""
         return {"sigma": self.sigma, "rng": self.rng.bit_generator.state}
@@ -43,6 +45,7 @@ class GaussianNoise:
         self.rng.bit_generator.state = state["rng"]
 
 
+# [ou-noise]
 class OrnsteinUhlenbeckNoise:
     """x_{t+1} = x_t + theta (mu - x_t) dt + sigma sqrt(dt) eps_t: mean-reverting, temporally correlated.
 
@@ -62,6 +65,7 @@ class OrnsteinUhlenbeckNoise:
     def reset(self) -> None:
         self.x[:] = self.mu
 
+    # [/ou-noise]
     def state_dict(self) -> dict:
         """The process's current value and the generator's state."""
         return {"x": self.x.tolist(), "rng": self.rng.bit_generator.state}
@@ -77,6 +81,7 @@ def action_distance(actor_a: torch.nn.Module, actor_b: torch.nn.Module, obs: tor
         return float(torch.sqrt(((actor_a(obs) - actor_b(obs)) ** 2).mean()).item())
 
 
+# [param-noise]
 class AdaptiveParamNoise:
     """A perturbed copy of the actor, theta~ = theta + N(0, sigma^2), with sigma adapted to a target distance.
 
@@ -118,6 +123,7 @@ class AdaptiveParamNoise:
         self.sigma = self.sigma / self.alpha if distance > self.target_distance else self.sigma * self.alpha
         return self.sigma
 
+    # [/param-noise]
     def state_dict(self) -> dict:
         """sigma, the generator's state and the current perturbed actor's weights."""
         return {"sigma": self.sigma, "generator": self.generator.get_state(),
