@@ -236,7 +236,8 @@ def test_ddpg_sweep_arms_change_one_setting_of_the_report_table_and_modern_runs_
     from rlcore.ddpg import Config
 
     base = {spec.env_id: spec for spec in ex.get_experiment("ddpg-report").runs}
-    expected = {"ant-no-explore": {"exploration"}, "halfcheetah-batch16": {"batch_size"},
+    expected = {"ant-no-explore": {"exploration"}, "halfcheetah-no-explore": {"exploration"},
+                "halfcheetah-param-noise": {"exploration", "noise_sigma"}, "halfcheetah-batch16": {"batch_size"},
                 "halfcheetah-batch256": {"batch_size"}, "hopper-hidden128": {"hidden"},
                 "hopper-hidden2048": {"hidden"}}
     arms = ex.get_experiment("ddpg-report-sweeps").runs

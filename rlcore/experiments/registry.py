@@ -166,6 +166,9 @@ def _ddpg_report() -> Experiment:
 REPORT_DDPG_SWEEPS: dict[str, tuple[str, dict[str, Any], str]] = {
     # run name: (env, what differs from the report's table, label)
     "ant-no-explore": ("Ant-v5", {"exploration": "none"}, "no exploration noise (the report's 'DDPG')"),
+    "halfcheetah-no-explore": ("HalfCheetah-v5", {"exploration": "none"}, "no exploration noise (its '+300')"),
+    "halfcheetah-param-noise": ("HalfCheetah-v5", {"exploration": "param", "noise_sigma": 0.1},
+                                "adaptive parameter noise (initial std 0.1, target distance 0.2, as Baselines)"),
     "halfcheetah-batch16": ("HalfCheetah-v5", {"batch_size": 16}, "batch size 16"),
     "halfcheetah-batch256": ("HalfCheetah-v5", {"batch_size": 256}, "batch size 256"),
     "hopper-hidden128": ("Hopper-v5", {"hidden": (128,)}, "one hidden layer of 128"),
@@ -181,8 +184,9 @@ def _ddpg_report_sweeps() -> Experiment:
                             f"DDPG on {env}, the report's settings but {label}"))
     return Experiment(
         "ddpg-report-sweeps",
-        "The report's DDPG comparisons: Ant without exploration, HalfCheetah batch sizes 16 and 256, Hopper hidden "
-        "layers of 128 and 2048 (the reference runs are ddpg-report's); the report's budgets, 5 seeds (3 on Hopper)",
+        "The report's DDPG comparisons: Ant and HalfCheetah without exploration, HalfCheetah with parameter noise and "
+        "with batch sizes 16 and 256, Hopper hidden layers of 128 and 2048 (the reference runs are ddpg-report's); "
+        "the report's budgets, 5 seeds (3 on Hopper)",
         tuple(runs),
     )
 
