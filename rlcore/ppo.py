@@ -68,13 +68,14 @@ class Config:
     gamma: float = 0.99
     """Discount factor."""
     gae_lambda: float = 0.95
-    """GAE's lambda: 0 is the one-step TD error, 1 the Monte-Carlo return minus V [lam]."""
+    """GAE's lambda: 0 is the one-step TD error, 1 the Monte-Carlo return minus V (the report's algorithm box uses
+    Monte-Carlo advantages, 1; its ``lam`` is the KL coefficient below)."""
     clip_range: float = 0.2
     """The clipped objective's epsilon [epsilon]."""
     kl_target: float = 0.01
     """The KL penalty's target KL per update [kl-target]."""
     kl_coef: float = 1.0
-    """The KL penalty's initial coefficient beta (lambda in the report's algorithm box)."""
+    """The KL penalty's initial coefficient beta (lambda in the report's algorithm box) [lam]."""
     kl_beta_low: float = 1 / 1.5
     """beta shrinks when KL < kl_beta_low * kl_target [beta-low]."""
     kl_beta_high: float = 1.5
