@@ -44,6 +44,9 @@ def test_same_seed_same_interval_and_the_global_random_state_is_left_alone():
     x = np.random.default_rng(1).normal(size=5)
     assert iqm_ci({"x": x}, reps=500, seed=3) == iqm_ci({"x": x}, reps=500, seed=3)
     assert iqm_ci({"x": x}, reps=500, seed=3) != iqm_ci({"x": x}, reps=500, seed=4)
+    # an arm's interval does not depend on the other arms in the call
+    y = np.random.default_rng(2).normal(size=5)
+    assert iqm_ci({"y": y, "x": x}, reps=500, seed=3)["x"] == iqm_ci({"x": x}, reps=500, seed=3)["x"]
     np.random.seed(123)
     expected = np.random.rand(3)
     np.random.seed(123)

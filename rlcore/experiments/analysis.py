@@ -148,17 +148,20 @@ def iqm_ci(scores_by_arm: Mapping[str, Any], reps: int = 2000, seed: int = 0,
     the middle 50 % of all the arm's scores (a 25 % trimmed mean). The interval is rliable's percentile
     interval over ``reps`` resamples, each drawing runs with replacement *within each task*
     (Agarwal et al., 2021); with one task that is the ordinary bootstrap over seeds. Returns
-    ``{arm: (iqm, low, high)}``; the same ``seed`` gives the same interval.
+    ``{arm: (iqm, low, high)}``. Each arm is resampled from ``seed`` on its own, so an arm's interval is the
+    same whatever other arms the call includes.
     """
     from rliable import library as rly
     from rliable import metrics
 
-    scores = {arm: _runs_by_tasks(v) for arm, v in scores_by_arm.items()}
-    with _global_numpy_seed(seed):
-        point, interval = rly.get_interval_estimates(
-            scores, lambda x: np.array([metrics.aggregate_iqm(x)]), reps=reps,
-            confidence_interval_size=confidence)
-    return {arm: (float(point[arm][0]), float(interval[arm][0, 0]), float(interval[arm][1, 0])) for arm in scores}
+    out = {}
+    for arm, values in scores_by_arm.items():
+        with _global_numpy_seed(seed):
+            point, interval = rly.get_interval_estimates(
+                {arm: _runs_by_tasks(values)}, lambda x: np.array([metrics.aggregate_iqm(x)]), reps=reps,
+                confidence_interval_size=confidence)
+        out[arm] = (float(point[arm][0]), float(interval[arm][0, 0]), float(interval[arm][1, 0]))
+    return out
 
 
 def iqm_difference_ci(scores: Any, baseline: Any, reps: int = 2000, seed: int = 0,
