@@ -75,7 +75,6 @@ class PageRuns:
         return all(self[r].source == "results" and not self[r].missing for r in runs)
 
 
-# [check-results]
 def check_results(name: str, results: dict[str, RunResults] | None = None) -> None:
     """Raise ``ValueError`` unless every seed in ``results/`` for experiment ``name`` is what the registry says:
     one of its seeds, its environment, its budget (and finished: the last evaluation is at the last step), the
@@ -103,7 +102,6 @@ def check_results(name: str, results: dict[str, RunResults] | None = None) -> No
             if s.evals and "eval_episodes" in config and any(int(e) != config["eval_episodes"]
                                                              for e in s.evals["episodes"]):
                 raise ValueError(f"{where}: an evaluation has other than {config['eval_episodes']} episodes")
-# [/check-results]
 
 
 def _as_json(value: Any) -> Any:
