@@ -20,7 +20,8 @@ The package, one idea a module:
 - :mod:`rlcore.experiments.registry`: the named experiments (``RunSpec``, ``Experiment``, ``EXPERIMENTS``);
 - :mod:`rlcore.experiments.runner`: training them, one process per core, resumable;
 - :mod:`rlcore.experiments.results`: reading ``results/`` (or a short live stand-in) and its provenance;
-- :mod:`rlcore.experiments.analysis`: the statistics and tables the chapters quote.
+- :mod:`rlcore.experiments.analysis`: the statistics and tables the chapters quote;
+- :mod:`rlcore.experiments.pages`: an experiment's runs as a page loads, labels and describes them.
 
 Everything is importable from ``rlcore.experiments`` itself.
 """
@@ -78,4 +79,9 @@ from rlcore.experiments.analysis import (  # noqa: F401
     learning_seconds,
     scaling_rows,
     markdown_table,
+    eval_curves,
+    second_half_means,
+    iqm_ci,
+    iqm_difference_ci,
 )
+from rlcore.experiments.pages import PageRuns, check_results  # noqa: F401
