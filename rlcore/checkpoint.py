@@ -12,6 +12,7 @@ import os
 import tempfile
 import zipfile
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -95,6 +96,14 @@ def load_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
             "Pass a file written by `python -m rlcore train`."
         )
     return data
+
+
+class Saved:
+    """Checkpoint state that is not one ``state_dict`` under one key: ``save()`` returns checkpoint entries,
+    ``load(ckpt)`` restores them from a checkpoint."""
+
+    def __init__(self, save: Callable[[], dict[str, Any]], load: Callable[[dict[str, Any]], None]):
+        self.save, self.load = save, load
 
 
 def running_stats_state(rms: Any, prefix: str) -> dict[str, Any]:

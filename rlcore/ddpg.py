@@ -26,9 +26,9 @@ from torch import nn
 from rlcore.buffers import ReplayBuffer
 from rlcore.config import check_budget, check_config
 from rlcore.envs import ObservationScaler, make_env, normalize_observation
-from rlcore.harness import EPISODE_COLUMNS, Run, Saved, evaluation, running_stats, torch_rng
+from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, running_stats, torch_rng
 from rlcore.nets import mlp, soft_update
-from rlcore.noise import AdaptiveParamNoise, GaussianNoise, OrnsteinUhlenbeckNoise
+from rlcore.noise import exploration_state, first_behaviour, make_exploration, noise_sigma
 from rlcore.runs import episode_seed
 
 POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
@@ -222,54 +222,10 @@ def make_optimizers(actor: Actor, critic: Critic, config: Config) -> tuple[torch
             torch.optim.Adam(critic.parameters(), lr=config.critic_lr, fused=True))
 
 
-def first_behaviour(actor: Actor, param_noise: AdaptiveParamNoise | None) -> nn.Module:
-    """The network that acts first: the actor, or with parameter noise the perturbed actor a checkpoint restored
-    (or a fresh perturbation)."""
-    if param_noise is None:
-        return actor
-    return param_noise.perturbed if param_noise.perturbed is not None else param_noise.perturb(actor)
-
-
 def saved_policy(actor: Actor, scaler: ObservationScaler | None) -> DeterministicPolicy:
     """The deterministic policy now, with a copy of the observation statistics (normalize_obs)."""
     stats = () if scaler is None else (scaler.rms.mean.copy(), scaler.rms.var.copy())
     return DeterministicPolicy(actor, *stats)
-
-
-def make_exploration(config: Config, act_dim: int, seed: int) -> tuple[Any, AdaptiveParamNoise | None]:
-    """``(action noise or None, parameter noise or None)`` for ``config.exploration``."""
-    if config.exploration == "gaussian":
-        return GaussianNoise(act_dim, config.noise_sigma, config.explore_decay, seed=seed), None
-    if config.exploration == "ou":
-        return OrnsteinUhlenbeckNoise(act_dim, sigma=config.noise_sigma, seed=seed), None
-    if config.exploration == "param":
-        return None, AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed)
-    return None, None
-
-
-def noise_sigma(noise: Any, param_noise: AdaptiveParamNoise | None) -> float:
-    """The exploration's current scale (0 without noise)."""
-    return float(getattr(param_noise if param_noise is not None else noise, "sigma", 0.0))
-
-
-def exploration_state(noise: Any, param_noise: AdaptiveParamNoise | None, actor: Actor) -> Saved:
-    """The noise's generator and state in a checkpoint (``noise``), so that a resumed run continues as if never
-    stopped; a checkpoint from before rlcore saved them restores only the scale (``noise_sigma``)."""
-    source = param_noise if param_noise is not None else noise
-
-    def save() -> dict[str, Any]:
-        return {"noise_sigma": noise_sigma(noise, param_noise),
-                **({"noise": source.state_dict()} if source is not None else {})}
-
-    def load(ckpt: dict[str, Any]) -> None:
-        if "noise" in ckpt and param_noise is not None:
-            param_noise.load_state_dict(ckpt["noise"], actor)
-        elif "noise" in ckpt and noise is not None:
-            noise.load_state_dict(ckpt["noise"])
-        elif hasattr(source, "sigma"):
-            source.sigma = float(ckpt["noise_sigma"])
-
-    return Saved(save, load)
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,

@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from rlcore.checkpoint import load_running_stats, running_stats_state, save_checkpoint
+from rlcore.checkpoint import Saved, load_running_stats, running_stats_state, save_checkpoint  # noqa: F401
 from rlcore.logger import CSVLogger
 from rlcore.runs import RunDir, config_dict, open_run
 
@@ -41,14 +41,6 @@ EPISODE_COLUMNS = ["episode", "step", "episode_return", "episode_length"]
 """The columns of ``progress.csv`` for an algorithm that logs one row per episode (before its own ones)."""
 EVAL_COLUMNS = ["step", "mean_return", "std_return", "episodes"]
 """The columns of ``eval.csv`` (before an algorithm's own ones)."""
-
-
-class Saved:
-    """Checkpoint state that is not one ``state_dict`` under one key: ``save()`` returns checkpoint entries,
-    ``load(ckpt)`` restores them from a checkpoint."""
-
-    def __init__(self, save: Callable[[], dict[str, Any]], load: Callable[[dict[str, Any]], None]):
-        self.save, self.load = save, load
 
 
 def torch_rng() -> Saved:

@@ -14,9 +14,13 @@
 from __future__ import annotations
 
 import copy
+from typing import Any
 
 import numpy as np
 import torch
+from torch import nn
+
+from rlcore.checkpoint import Saved
 
 
 # [gaussian-noise]
@@ -137,3 +141,51 @@ class AdaptiveParamNoise:
         if state["perturbed"] is not None:
             self.perturbed = copy.deepcopy(actor)
             self.perturbed.load_state_dict(state["perturbed"])
+
+
+# --- choosing and keeping the exploration of a DDPG run ----------------------------------------
+
+
+def make_exploration(config: Any, act_dim: int, seed: int) -> tuple[Any, AdaptiveParamNoise | None]:
+    """``(action noise or None, parameter noise or None)`` for a DDPG Config's ``exploration`` (``gaussian``, ``ou``,
+    ``param`` or ``none``), with its ``noise_sigma``, ``explore_decay`` and ``param_noise_target``."""
+    if config.exploration == "gaussian":
+        return GaussianNoise(act_dim, config.noise_sigma, config.explore_decay, seed=seed), None
+    if config.exploration == "ou":
+        return OrnsteinUhlenbeckNoise(act_dim, sigma=config.noise_sigma, seed=seed), None
+    if config.exploration == "param":
+        return None, AdaptiveParamNoise(config.noise_sigma, config.param_noise_target, seed=seed)
+    return None, None
+
+
+def noise_sigma(noise: Any, param_noise: AdaptiveParamNoise | None) -> float:
+    """The exploration's current scale (0 without noise)."""
+    return float(getattr(param_noise if param_noise is not None else noise, "sigma", 0.0))
+
+
+def exploration_state(noise: Any, param_noise: AdaptiveParamNoise | None, actor: nn.Module) -> Saved:
+    """The noise's generator and state in a checkpoint (``noise``), so that a resumed run continues as if never
+    stopped; a checkpoint from before rlcore saved them restores only the scale (``noise_sigma``)."""
+    source = param_noise if param_noise is not None else noise
+
+    def save() -> dict[str, Any]:
+        return {"noise_sigma": noise_sigma(noise, param_noise),
+                **({"noise": source.state_dict()} if source is not None else {})}
+
+    def load(ckpt: dict[str, Any]) -> None:
+        if "noise" in ckpt and param_noise is not None:
+            param_noise.load_state_dict(ckpt["noise"], actor)
+        elif "noise" in ckpt and noise is not None:
+            noise.load_state_dict(ckpt["noise"])
+        elif hasattr(source, "sigma"):
+            source.sigma = float(ckpt["noise_sigma"])
+
+    return Saved(save, load)
+
+
+def first_behaviour(actor: nn.Module, param_noise: AdaptiveParamNoise | None) -> nn.Module:
+    """The network that acts first: the actor, or with parameter noise the perturbed actor a checkpoint restored
+    (or a fresh perturbation)."""
+    if param_noise is None:
+        return actor
+    return param_noise.perturbed if param_noise.perturbed is not None else param_noise.perturb(actor)
