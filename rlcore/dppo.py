@@ -60,9 +60,7 @@ bit-identical to an uninterrupted one. The number of workers may change between 
 
 from __future__ import annotations
 
-import argparse
 import os
-import shlex
 import sys
 import time
 from dataclasses import dataclass
@@ -82,6 +80,7 @@ from rlcore.distributed import (LAUNCH_HELP, _broadcast, broadcast_weights, gath
                                 sync_running_stats)
 from rlcore.envs import make_env
 from rlcore.harness import Run, evaluation, running_stats
+from rlcore.launch import build_parser, launch_command  # noqa: F401 (python -m rlcore.dppo's command line)
 from rlcore.onpolicy import (OBS_CLIP, Rollout, annealing, check_spaces, collect_rollout, deterministic_policy,
                              make_agent, make_envs, set_learning_rate, training_statistics)
 from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
@@ -299,34 +298,6 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
 
 
 # --- command line ---------------------------------------------------------------------------------
-
-
-def build_parser() -> argparse.ArgumentParser:
-    from rlcore.cli import Parser, count, json_object
-
-    p = Parser(prog="torchrun --nproc_per_node N -m rlcore.dppo",
-                                description="Synchronous data-parallel PPO: run one process per worker with torchrun.")
-    p.add_argument("--env", required=True, help="Gymnasium environment id, e.g. HalfCheetah-v5")
-    p.add_argument("--steps", type=count(1), required=True, help="environment steps to train for, over all workers")
-    p.add_argument("--seed", type=count(0), default=0)
-    p.add_argument("--out", required=True, help="run folder, written by rank 0 (config, progress.csv, checkpoint.pt)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a Config field (repeatable), e.g. --set n_steps=1024 --set checkpoint_updates=5")
-    p.add_argument("--env-kwargs", type=json_object, help="JSON keyword arguments for gymnasium.make")
-    p.add_argument("--threads", type=count(1), default=1, help="torch threads per worker (default 1)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar on rank 0")
-    p.add_argument("--dump-params", metavar="DIR", help="(testing) every rank writes its final state to DIR/rank{r}.pt")
-    return p
-
-
-def launch_command(argv: list[str] | None = None) -> str:
-    """This job's command line as a user would type it (torchrun's options beyond the worker count are not known)."""
-    args = shlex.join(sys.argv[1:] if argv is None else argv)
-    if "LOCAL_WORLD_SIZE" not in os.environ:
-        return f"python -m rlcore.dppo {args}"
-    local, world = int(os.environ["LOCAL_WORLD_SIZE"]), int(os.environ.get("WORLD_SIZE", 1))
-    nodes = f" --nnodes {world // local}" if world > local else ""
-    return f"torchrun{nodes} --nproc_per_node {local} -m rlcore.dppo {args}"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -8,7 +8,9 @@ of a process and the rank torchrun gave a worker (read from Linux's ``/proc``).
 
 from __future__ import annotations
 
+import argparse
 import os
+import shlex
 import sys
 from pathlib import Path
 from typing import Any
@@ -53,3 +55,34 @@ def worker_rank(pid: int) -> int:
         if entry.startswith(b"RANK="):
             return int(entry.split(b"=", 1)[1])
     return -1
+
+
+# --- python -m rlcore.dppo's command line ------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from rlcore.cli import Parser, count, json_object
+
+    p = Parser(prog="torchrun --nproc_per_node N -m rlcore.dppo",
+                                description="Synchronous data-parallel PPO: run one process per worker with torchrun.")
+    p.add_argument("--env", required=True, help="Gymnasium environment id, e.g. HalfCheetah-v5")
+    p.add_argument("--steps", type=count(1), required=True, help="environment steps to train for, over all workers")
+    p.add_argument("--seed", type=count(0), default=0)
+    p.add_argument("--out", required=True, help="run folder, written by rank 0 (config, progress.csv, checkpoint.pt)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a Config field (repeatable), e.g. --set n_steps=1024 --set checkpoint_updates=5")
+    p.add_argument("--env-kwargs", type=json_object, help="JSON keyword arguments for gymnasium.make")
+    p.add_argument("--threads", type=count(1), default=1, help="torch threads per worker (default 1)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on rank 0")
+    p.add_argument("--dump-params", metavar="DIR", help="(testing) every rank writes its final state to DIR/rank{r}.pt")
+    return p
+
+
+def launch_command(argv: list[str] | None = None) -> str:
+    """This job's command line as a user would type it (torchrun's options beyond the worker count are not known)."""
+    args = shlex.join(sys.argv[1:] if argv is None else argv)
+    if "LOCAL_WORLD_SIZE" not in os.environ:
+        return f"python -m rlcore.dppo {args}"
+    local, world = int(os.environ["LOCAL_WORLD_SIZE"]), int(os.environ.get("WORLD_SIZE", 1))
+    nodes = f" --nnodes {world // local}" if world > local else ""
+    return f"torchrun{nodes} --nproc_per_node {local} -m rlcore.dppo {args}"
