@@ -166,3 +166,22 @@ def find_wrapper(env: Any, cls: type) -> Any:
             return None
         env = env.env
     return env
+
+
+def env_setting(env_id: str, name: str) -> Any:
+    """A setting of a registered environment, as ``gymnasium.make(env_id)`` would use it: the registration's keyword
+    argument if it gives one, else the default of the environment class's constructor (``healthy_z_range``, say),
+    read through public APIs only."""
+    import inspect
+
+    check_env_id(env_id)
+    spec = gym.spec(env_id)
+    if name in spec.kwargs:
+        return spec.kwargs[name]
+    entry = spec.entry_point
+    cls = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
+    params = inspect.signature(cls).parameters
+    if name not in params or params[name].default is inspect.Parameter.empty:
+        raise ValueError(f"{env_id} has no setting {name!r} with a default; its settings: "
+                         f"{', '.join(p for p in params if p not in ('self', 'kwargs'))}")
+    return params[name].default

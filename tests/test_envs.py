@@ -92,3 +92,17 @@ def test_observation_scaler_keeps_gymnasiums_statistics_and_scales_like_the_poli
     np.testing.assert_allclose(scaled.numpy(), normalize_observation(xs, reference.mean, reference.var),
                                rtol=1e-5, atol=1e-4)
     assert scaler.scale(np.array([[1e9, 3.0, 3.0]])).max() == 10.0  # clipped as the policy clips
+
+
+def test_env_setting_reads_registered_and_default_settings_without_private_attributes():
+    from rlcore.envs import env_setting
+
+    assert env_setting("Hopper-v5", "healthy_z_range") == (0.7, float("inf"))
+    assert env_setting("Humanoid-v5", "healthy_z_range") == (1.0, 2.0)
+    # the value gymnasium.make uses is the one the environment holds
+    env = gym.make("Ant-v5")
+    assert env.unwrapped._healthy_z_range == env_setting("Ant-v5", "healthy_z_range")
+    env.close()
+    assert env_setting("FrozenLake-v1", "map_name") == "4x4"  # a registration's own keyword argument
+    with pytest.raises(ValueError, match="no setting 'nope'"):
+        env_setting("Hopper-v5", "nope")
