@@ -77,7 +77,7 @@ class Run:
     to whole iterations). ``schedules``: what the budget shapes, so that a resume must keep it (see
     :func:`rlcore.runs.open_run`). ``evaluate()`` returns one row of ``eval.csv`` (without ``step``); it runs
     every ``config.eval_every`` steps, and at the end too with ``eval_at_end``. ``logs``: extra CSV logs, file
-    stem to columns; ``progress`` is the per-episode log unless ``episode_log`` is False. ``checkpoint_on``:
+    stem to columns; ``progress`` is the per-episode log, with columns ``episode_log``, unless that is None. ``checkpoint_on``:
     the counter whose multiples of ``checkpoint_every`` (default ``config.checkpoint_every``) are checkpointed.
     ``close``: environments to close at the end. ``opened``: an already opened ``(RunDir, checkpoint)``
     (data-parallel training opens the folder on one worker only). ``meta``: extra fields for ``meta.json``.
@@ -200,12 +200,10 @@ class Run:
     def step_done(self, step: int, before: int, **counters: Any) -> None:
         """The loop moved from ``before`` to ``step`` environment steps (and its other counters to ``counters``):
         evaluate if an evaluation step was passed, checkpoint if a checkpoint step was passed, move the bar."""
-        previous = self.counters.get(self.checkpoint_on, 0)
+        previous = before if self.checkpoint_on == "step" else self.counters.get(self.checkpoint_on, 0)
         self.counters.update(step=step, **counters)
         if crossed(self.eval_every, step, before) or (self.eval_at_end and self.eval_every and step >= self.target):
             self.evaluate_now(step)
-        if self.checkpoint_on == "step":
-            previous = before
         if crossed(self.checkpoint_every, self.counters[self.checkpoint_on], previous):
             self.checkpoint()
         if self.bar is not None:
