@@ -1,0 +1,75 @@
+"""Returns of a peer library on one task, as `benchmarks/ppo_returns_vs_sb3.py` records them in
+``results/benchmarks/ppo-returns-sb3-<task>.json``: per seed, the deterministic policy's evaluations during training
+and its returns on fresh episodes at the end, with the command, versions and machine that made them.
+
+A page reads a record with :func:`load_peer` and shows it beside rlcore's runs of the same settings."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rlcore.experiments.registry import RESULTS_DIR
+
+
+def peer_path(env_id: str, results_dir: Path = RESULTS_DIR) -> Path:
+    """Where the returns benchmark writes its record for ``env_id`` (``HalfCheetah-v5`` -> ``...-halfcheetah.json``)."""
+    return Path(results_dir) / "benchmarks" / f"ppo-returns-sb3-{env_id.split('-')[0].lower()}.json"
+
+
+@dataclass(frozen=True)
+class PeerRuns:
+    """One task's record of the returns benchmark."""
+
+    record: dict[str, Any]
+
+    @property
+    def env_id(self) -> str:
+        return self.record["env_id"]
+
+    @property
+    def seeds(self) -> list[int]:
+        return [r["seed"] for r in self.record["seeds"]]
+
+    def curves(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per seed: (environment steps, mean evaluation return) during training, for `plot_learning_curves`."""
+        return [(np.asarray(r["evals"]["step"]), np.asarray(r["evals"]["mean_return"])) for r in self.record["seeds"]]
+
+    def final_returns(self) -> np.ndarray:
+        """Per seed: the mean return of the final policy's fresh evaluation episodes."""
+        return np.array([np.mean(r["final_returns"]) for r in self.record["seeds"]])
+
+    @property
+    def final_episodes(self) -> int:
+        """Episodes in each seed's final evaluation (the same for every seed of a record)."""
+        counts = {len(r["final_returns"]) for r in self.record["seeds"]}
+        if len(counts) != 1:
+            raise ValueError(f"{self.env_id}: seeds have different final-evaluation lengths {sorted(counts)}")
+        return counts.pop()
+
+    def provenance_markdown(self) -> str:
+        """A collapsed MyST dropdown: library version, seeds, steps, command, commits, versions, machine, evaluation."""
+        r, v = self.record, self.record["versions"]
+        commits = ", ".join(dict.fromkeys(
+            str(s["commit"])[:7] + (" (with uncommitted changes)" if "dirty" in str(s["commit"]) else "")
+            for s in r["seeds"]))
+        return (f"::::{{dropdown}} Provenance: Stable-Baselines3 on {self.env_id}\n"
+                f"*Stable-Baselines3 {v['stable_baselines3']}, seeds {', '.join(map(str, self.seeds))}, "
+                f"{r['steps']:,} steps each: `{r['command']}` at commit {commits}; PyTorch {v['torch']}, "
+                f"Gymnasium {v['gymnasium']}, {r['machine']['cpu_count']} CPUs. Its evaluation: {r['evaluation']}.*"
+                "\n::::\n")
+
+
+def load_peer(env_id: str, results_dir: Path = RESULTS_DIR) -> PeerRuns | None:
+    """The record for ``env_id``, or None when there is none or it holds no finished seed yet."""
+    path = peer_path(env_id, results_dir)
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    if record.get("env_id") != env_id:
+        raise ValueError(f"{path} records {record.get('env_id')!r}, not {env_id!r}")
+    return PeerRuns(record) if record.get("seeds") else None
