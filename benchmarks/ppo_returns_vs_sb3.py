@@ -3,7 +3,7 @@
     pip install -r requirements.txt -r benchmarks/requirements.txt
     python benchmarks/ppo_returns_vs_sb3.py --env HalfCheetah-v5 --seeds 0,1,2
 
-The peer for chapter 6's HalfCheetah table: what the library the RL-Zoo figures come from reaches with the
+The peer for section 6.1's tables (chapters/06a_ppo_mujoco.md): what the library the RL-Zoo figures come from reaches with the
 same hyperparameters, task (`-v5`), budget and seeds on this machine. It is set up as the RL Zoo sets it up
 (rl_zoo3's ``normalize: true``): one environment in a DummyVecEnv with a Monitor, SB3's own VecNormalize for
 observations and rewards (clipped to +-10, the reward discounted with the algorithm's gamma). The settings
