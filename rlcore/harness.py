@@ -210,11 +210,13 @@ class Run:
             self.bar.update(step - before)
 
     def evaluate_now(self, step: int) -> dict[str, float]:
-        """Evaluate now: a row of ``eval.csv``; the policy's networks go back to training mode after."""
+        """Evaluate now: a row of ``eval.csv``; every tracked network (and each of its parts) goes back to the
+        mode, training or evaluation, it was in before (an evaluation may switch the policy to eval())."""
+        modes = [(part, part.training) for value in self.tracked.values() if isinstance(value, torch.nn.Module)
+                 for part in value.modules()]
         row = {"step": step, **self.evaluate()}
-        for value in self.tracked.values():
-            if isinstance(value, torch.nn.Module):
-                value.train()
+        for part, training in modes:
+            part.train(training)
         self.evals.append(row)
         self.log("eval", **row)
         return row

@@ -139,3 +139,22 @@ def test_saved_pairs_and_running_statistics_round_trip(tmp_path):
 
 def test_crossed():
     assert crossed(4, 4, 3) and crossed(4, 9, 7) and not crossed(4, 7, 4) and not crossed(0, 8, 0)
+
+
+def test_an_evaluation_leaves_every_network_in_the_mode_it_found_it():
+    policy = torch.nn.Sequential(torch.nn.Linear(1, 1), torch.nn.Dropout(0.5))
+    target = torch.nn.Linear(1, 1).eval()              # kept in evaluation mode by its algorithm
+    policy[1].eval()                                   # a part in another mode than its parent
+    seen = []
+
+    def evaluate():
+        policy.eval()
+        target.train()                                 # an evaluation that touches the modes
+        seen.append((policy.training, target.training))
+        return {"mean_return": 0.0, "std_return": 0.0, "episodes": 1}
+
+    run = Run("toy", "Toy-v0", ToyConfig(), 1, 0, None, desc="toy", evaluate=evaluate)
+    run.track(policy=policy, target=target)
+    run.evaluate_now(1)
+    assert seen == [(False, True)]
+    assert policy.training and not policy[1].training and not target.training
