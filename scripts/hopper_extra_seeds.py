@@ -1,7 +1,8 @@
-"""(Run from the repository root: python scripts/hopper_extra_seeds.py.) Seeds 3 and 4 of ddpg-report-sweeps/hopper-hidden2048, which the registry does not list yet (its Hopper arms
-list seeds 0-2 until this arm has five): train_one with the arm's own spec, into the usual work and results
-folders. Resumable: run it again after an interruption. When both are in results/, set
-REPORT_DDPG_SEEDS["Hopper-v5"] to (0, 1, 2, 3, 4) and update section 5.2's Hopper verdict."""
+"""(Run from the repository root: python scripts/hopper_extra_seeds.py.) How seeds 3 and 4 of
+ddpg-report-sweeps/hopper-hidden2048 were trained (their meta.json names this command), while the registry listed
+Hopper seeds 0-2 only: train_one with the arm's own spec, into the usual work and results folders; resumable.
+Now that REPORT_DDPG_SEEDS["Hopper-v5"] lists all five, `python -m rlcore experiments run ddpg-report-sweeps
+--only hopper-hidden2048` does the same; this script stays as the provenance of those two seeds."""
 from rlcore.experiments.registry import get_experiment
 from rlcore.experiments.runner import train_one
 from rlcore.runs import stop_on_signals
