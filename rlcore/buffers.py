@@ -72,15 +72,36 @@ class ReplayBuffer:
         return self._gather(idx, np.ones(batch_size, dtype=np.float32))
 
     def state_dict(self) -> dict[str, Any]:
+        """The memory as a checkpoint keeps it. Within an episode a transition's next observation is the next slot's
+        observation, so ``next_obs`` is kept only for the slots where it is not, bit for bit (episode ends, the
+        newest slot, the seam of a full circular memory): about half the bytes of storing both arrays."""
         n = self.size
-        return {"obs": self.obs[:n], "next_obs": self.next_obs[:n], "actions": self.actions[:n],
-                "rewards": self.rewards[:n], "terminated": self.terminated[:n], "pos": self.pos,
-                "size": self.size, "rng": self.rng.bit_generator.state}
+        rows = self._next_obs_rows()
+        return {"obs": self.obs[:n], "next_obs_rows": rows, "next_obs_at_rows": self.next_obs[rows],
+                "actions": self.actions[:n], "rewards": self.rewards[:n], "terminated": self.terminated[:n],
+                "pos": self.pos, "size": self.size, "rng": self.rng.bit_generator.state}
+
+    def _next_obs_rows(self, block: int = 65_536) -> np.ndarray:
+        """Slots i < size whose next_obs differs in any bit from obs[i + 1] (the last slot always counts)."""
+        n = self.size
+        if n == 0:
+            return np.zeros(0, dtype=np.int64)
+        flat_obs, flat_next = self.obs[:n].reshape(n, -1), self.next_obs[:n].reshape(n, -1)
+        as_bits = (lambda a: a.view(np.uint32)) if flat_obs.dtype.itemsize == 4 else (lambda a: a)
+        rows = [np.flatnonzero(np.any(as_bits(flat_next[i:min(i + block, n - 1)])
+                                      != as_bits(flat_obs[i + 1:min(i + block, n - 1) + 1]), axis=1)) + i
+                for i in range(0, max(n - 1, 0), block)]
+        return np.concatenate([*rows, np.arange(max(n - 1, 0), n)]).astype(np.int64)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         n = int(state["size"])
-        for name in ("obs", "next_obs", "actions", "rewards", "terminated"):
+        for name in ("obs", "actions", "rewards", "terminated"):
             getattr(self, name)[:n] = np.asarray(state[name])
+        if "next_obs" in state:                      # checkpoints written before next_obs was stored once
+            self.next_obs[:n] = np.asarray(state["next_obs"])
+        elif n > 0:
+            self.next_obs[:n - 1] = self.obs[1:n]
+            self.next_obs[np.asarray(state["next_obs_rows"])] = np.asarray(state["next_obs_at_rows"])
         self.pos, self.size = int(state["pos"]), n
         self.rng.bit_generator.state = state["rng"]
 

@@ -159,3 +159,61 @@ def test_gae_vectorized_over_envs():
     adv, _ = gae(r, v, v, np.zeros((4, 2)), np.zeros((4, 2)), gamma=1.0, lam=1.0)
     np.testing.assert_allclose(adv[:, 0], [4, 3, 2, 1])
     np.testing.assert_allclose(adv[:, 1], [4, 3, 2, 1])
+
+
+def _episodes(buf, steps, length, rng, shape=(3,)):
+    """Fill ``buf`` as a training loop does: each next observation is the next step's observation, except at an
+    episode's end, where the loop resets to a fresh one."""
+    obs = rng.standard_normal(shape).astype(np.float32)
+    for t in range(steps):
+        nxt = rng.standard_normal(shape).astype(np.float32)
+        ended = (t + 1) % length == 0
+        buf.add(obs, t % 2, float(t), nxt, ended)
+        obs = rng.standard_normal(shape).astype(np.float32) if ended else nxt
+
+
+@pytest.mark.parametrize("steps", [0, 1, 7, 10, 23])          # empty, one, partly full, exactly full, wrapped
+def test_a_checkpoint_keeps_next_obs_once_and_restores_it_bit_for_bit(steps):
+    a = ReplayBuffer(10, (3,), seed=1)
+    _episodes(a, steps, length=4, rng=np.random.default_rng(steps))
+    state = a.state_dict()
+    assert "next_obs" not in state and len(state["next_obs_rows"]) < max(len(a), 1) / 2 + 2
+    b = ReplayBuffer(10, (3,), seed=99)
+    b.load_state_dict(state)
+    for name in ("obs", "next_obs", "actions", "rewards", "terminated"):
+        np.testing.assert_array_equal(getattr(a, name)[:len(a)].view(np.uint8), getattr(b, name)[:len(b)].view(np.uint8))
+    assert (b.pos, len(b)) == (a.pos, len(a))
+
+
+def test_next_obs_is_compared_bit_for_bit():
+    a = ReplayBuffer(4, (2,), seed=0)
+    a.add(np.zeros(2), 0, 0.0, np.array([-0.0, np.nan]), False)    # equal to the next obs by ==, not by bits
+    a.add(np.array([0.0, np.nan]), 0, 0.0, np.ones(2), False)
+    a.add(np.ones(2), 0, 0.0, np.full(2, 2.0), False)
+    b = ReplayBuffer(4, (2,), seed=0)
+    b.load_state_dict(a.state_dict())
+    np.testing.assert_array_equal(a.next_obs.view(np.uint32), b.next_obs.view(np.uint32))
+    assert a.state_dict()["next_obs_rows"].tolist() == [0, 2]
+
+
+def test_a_checkpoint_with_both_observation_arrays_still_loads():
+    a = ReplayBuffer(10, (3,), seed=1)
+    _episodes(a, 13, length=4, rng=np.random.default_rng(0))
+    n = len(a)
+    old = {"obs": a.obs[:n], "next_obs": a.next_obs[:n], "actions": a.actions[:n], "rewards": a.rewards[:n],
+           "terminated": a.terminated[:n], "pos": a.pos, "size": n, "rng": a.rng.bit_generator.state}
+    b = ReplayBuffer(10, (3,), seed=5)
+    b.load_state_dict(old)
+    np.testing.assert_array_equal(a.next_obs, b.next_obs)
+
+
+def test_prioritized_memory_round_trips_through_the_compact_checkpoint():
+    a = PrioritizedReplayBuffer(8, (3,), seed=1)
+    _episodes(a, 11, length=3, rng=np.random.default_rng(3))
+    a.update_priorities(np.array([1, 5]), np.array([4.0, 0.5]))
+    b = PrioritizedReplayBuffer(8, (3,), seed=1)
+    b.load_state_dict(a.state_dict())
+    np.testing.assert_array_equal(a.next_obs, b.next_obs)
+    x, y = a.sample(6), b.sample(6)
+    np.testing.assert_array_equal(x.indices, y.indices)
+    np.testing.assert_array_equal(x.next_obs, y.next_obs)

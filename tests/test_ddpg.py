@@ -163,6 +163,7 @@ def test_resume_continues_from_the_checkpoint(tmp_path):
 
 def test_normalize_obs_scales_what_the_networks_see_by_the_running_statistics(tmp_path):
     torch.set_num_threads(1)
+    from rlcore.buffers import ReplayBuffer
     from rlcore.checkpoint import load_checkpoint
     from rlcore.ddpg import DeterministicPolicy
     from rlcore.experiments import export_policy
@@ -170,7 +171,9 @@ def test_normalize_obs_scales_what_the_networks_see_by_the_running_statistics(tm
     cfg = Config(normalize_obs=True, **{**SMALL, "learning_starts": 100})
     result = train("Pendulum-v1", cfg, steps=400, seed=0, out=tmp_path / "run")
     ckpt = load_checkpoint(tmp_path / "run" / "checkpoint.pt")
-    seen = np.asarray(ckpt["replay"]["next_obs"])[:400]  # every observation a step returned
+    memory = ReplayBuffer(400, (3,), (1,), np.float32)
+    memory.load_state_dict(ckpt["replay"])
+    seen = memory.next_obs[:400]  # every observation a step returned
     mean, var = np.asarray(ckpt["obs_mean"]), np.asarray(ckpt["obs_var"])
     np.testing.assert_allclose(mean, seen.mean(0), rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(var, seen.var(0), rtol=1e-3)
