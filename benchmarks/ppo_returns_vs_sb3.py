@@ -106,11 +106,12 @@ def main() -> None:
     import stable_baselines3
 
     import rlcore
+    from rlcore.experiments.peers import peer_path
     from rlcore.runs import git_commit
 
     settings, budget = sb3_settings(args.env)
     steps = args.steps or budget
-    out = Path(args.out or f"results/benchmarks/ppo-returns-sb3-{args.env.split('-')[0].lower()}.json")
+    out = Path(args.out) if args.out else peer_path(args.env)   # where rlcore.experiments.peers reads it
     record = json.loads(out.read_text()) if out.exists() else {"seeds": []}
     if record["seeds"] and record.get("steps") != steps:
         raise ValueError(f"{out} holds runs of {record.get('steps')} steps, not {steps}: choose another --out")

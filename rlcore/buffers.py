@@ -86,12 +86,12 @@ class ReplayBuffer:
         n = self.size
         if n == 0:
             return np.zeros(0, dtype=np.int64)
-        flat_obs, flat_next = self.obs[:n].reshape(n, -1), self.next_obs[:n].reshape(n, -1)
-        as_bits = (lambda a: a.view(np.uint32)) if flat_obs.dtype.itemsize == 4 else (lambda a: a)
-        rows = [np.flatnonzero(np.any(as_bits(flat_next[i:min(i + block, n - 1)])
-                                      != as_bits(flat_obs[i + 1:min(i + block, n - 1) + 1]), axis=1)) + i
-                for i in range(0, max(n - 1, 0), block)]
-        return np.concatenate([*rows, np.arange(max(n - 1, 0), n)]).astype(np.int64)
+        # observations are float32: compare their bits, so that -0.0 and 0.0 differ and NaN equals itself
+        bits, next_bits = self.obs[:n].reshape(n, -1).view(np.uint32), self.next_obs[:n].reshape(n, -1).view(np.uint32)
+        rows = [np.flatnonzero(np.any(next_bits[i:min(i + block, n - 1)] != bits[i + 1:min(i + block, n - 1) + 1],
+                                      axis=1)) + i
+                for i in range(0, n - 1, block)]
+        return np.concatenate([*rows, [n - 1]]).astype(np.int64)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         n = int(state["size"])

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from rlcore.experiments.registry import RESULTS_DIR
+from rlcore.experiments.results import commit_text
 
 
 def peer_path(env_id: str, results_dir: Path = RESULTS_DIR) -> Path:
@@ -54,9 +55,7 @@ class PeerRuns:
     def provenance_markdown(self) -> str:
         """A collapsed MyST dropdown: library version, seeds, steps, command, commits, versions, machine, evaluation."""
         r, v = self.record, self.record["versions"]
-        commits = ", ".join(dict.fromkeys(
-            str(s["commit"])[:7] + (" (with uncommitted changes)" if "dirty" in str(s["commit"]) else "")
-            for s in r["seeds"]))
+        commits = ", ".join(dict.fromkeys(commit_text(str(s["commit"])) for s in r["seeds"]))
         return (f"::::{{dropdown}} Provenance: Stable-Baselines3 on {self.env_id}\n"
                 f"*Stable-Baselines3 {v['stable_baselines3']}, seeds {', '.join(map(str, self.seeds))}, "
                 f"{r['steps']:,} steps each: `{r['command']}` at commit {commits}; PyTorch {v['torch']}, "

@@ -131,7 +131,7 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
                 f"page trained a short live run instead: seed(s) {seeds}, {run.steps:,} steps each (the full "
                 f"budget is {full.steps:,}). Run `{command}` to fill in `results/`.\n:::\n")
     commits = sorted({s.meta.get("commit") or "unknown" for s in run.seeds})
-    commits_text = ", ".join(c[:7] + (" (with uncommitted changes)" if c.endswith("+dirty") else "") for c in commits)
+    commits_text = ", ".join(commit_text(c) for c in commits)
     meta = run.seeds[0].meta if run.seeds else {}
     v = meta.get("versions", {})
     text = (f"*{run.label}*: `{folder}`, seeds {seeds} ({len(seeds)} of {len(full.seeds)}), {run.steps:,} steps "
@@ -161,6 +161,11 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
     return text
 
 
+def commit_text(commit: str) -> str:
+    """A recorded commit as provenance prints it: its short hash, and whether the checkout had uncommitted changes."""
+    return commit[:7] + (" (with uncommitted changes)" if commit.endswith("+dirty") else "")
+
+
 def live_provenance_markdown(label: str, what: str, command: str | None = None) -> str:
     """The provenance of a run a page trained itself while the book was built, in a collapsed dropdown
     ("Provenance: <label>"): ``what`` it was (seed, steps, settings), the command line that repeats it, and the
@@ -171,7 +176,7 @@ def live_provenance_markdown(label: str, what: str, command: str | None = None) 
     v, commit = meta["versions"], meta.get("commit") or "unknown"
     text = (f"*{label}*: trained on this page while the book was built, not read from `results/`: {what}. "
             + (f"The same run from the command line: `{command}`. " if command else "")
-            + f"Code at commit {commit[:7]}{' (with uncommitted changes)' if commit.endswith('+dirty') else ''}; "
+            + f"Code at commit {commit_text(commit)}; "
             f"Gymnasium {v.get('gymnasium')}, PyTorch {v.get('torch')}, NumPy {v.get('numpy')}, "
             f"Python {v.get('python')}, {meta['machine'].get('cpus', '?')} CPUs.")
     return f"::::{{dropdown}} Provenance: {label}\n{text}\n::::\n"
