@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -44,10 +43,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.env_kwargs is not None:
         overrides["env_kwargs"] = args.env_kwargs
     config = module.make_config(args.algo, **overrides)
-    import torch
+    from rlcore.runs import torch_threads
 
-    # the book's networks are small: one thread is fastest, and several runs can share the cores (as `experiments`)
-    torch.set_num_threads(int(os.environ.get("RLCORE_TORCH_THREADS", "1")))
+    torch_threads()  # one unless RLCORE_TORCH_THREADS says more
     try:
         module.train(args.env, config, steps=args.steps, seed=args.seed, out=args.out,
                      progress=not args.no_progress)

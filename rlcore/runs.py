@@ -139,6 +139,26 @@ def versions() -> dict[str, str]:
     return out
 
 
+def torch_threads() -> int:
+    """Set and return torch's thread count for training: ``RLCORE_TORCH_THREADS``, 1 if unset.
+
+    The book's networks are small: one thread each is fastest per core, and several runs share the cores. A
+    single long run on an otherwise idle machine may take more (``RLCORE_TORCH_THREADS=2``); the count is recorded
+    in each run's ``meta.json``.
+    """
+    import torch
+
+    raw = os.environ.get("RLCORE_TORCH_THREADS", "1")
+    try:
+        n = int(raw)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"RLCORE_TORCH_THREADS={raw!r}: give a whole number of threads, 1 or more")
+    torch.set_num_threads(n)
+    return n
+
+
 def command_line() -> str | None:
     """How this process was started, as a user would type it (``python -m rlcore ...`` for the CLI)."""
     if not sys.argv or not sys.argv[0]:
@@ -153,6 +173,12 @@ def command_line() -> str | None:
     return shlex.join([*head, *sys.argv[1:]])
 
 
+def _torch_threads_now() -> int:
+    import torch
+
+    return torch.get_num_threads()
+
+
 def run_metadata(**extra: Any) -> dict[str, Any]:
     """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``.
 
@@ -163,7 +189,8 @@ def run_metadata(**extra: Any) -> dict[str, Any]:
         "command": command_line(),
         "versions": versions(),
         "commit": LOADED_COMMIT,
-        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count()},
+        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count(),
+                    "torch_threads": _torch_threads_now()},
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **extra,
     }

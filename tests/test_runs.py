@@ -120,3 +120,36 @@ def test_the_recorded_command_names_the_module_a_user_would_run(monkeypatch):
     assert command_line() == "python -m rlcore.experiments.versus --arm 'a b'"
     monkeypatch.setattr("sys.argv", ["/somewhere/benchmarks/ppo_vs_sb3.py", "--steps", "10"])
     assert command_line() == "ppo_vs_sb3.py --steps 10"
+
+
+@pytest.mark.parametrize("raw", ["0", "-1", "two", ""])
+def test_a_bad_thread_count_is_refused_in_one_line(raw, monkeypatch):
+    monkeypatch.setenv("RLCORE_TORCH_THREADS", raw)
+    with pytest.raises(ValueError, match="RLCORE_TORCH_THREADS.*whole number"):
+        runs.torch_threads()
+
+
+def test_the_thread_count_is_set_and_recorded_in_the_metadata(monkeypatch):
+    import torch
+
+    before = torch.get_num_threads()
+    try:
+        monkeypatch.setenv("RLCORE_TORCH_THREADS", "2")
+        assert runs.torch_threads() == 2
+        assert torch.get_num_threads() == 2
+        assert runs.run_metadata()["machine"]["torch_threads"] == 2
+        monkeypatch.delenv("RLCORE_TORCH_THREADS")
+        assert runs.torch_threads() == 1
+        assert runs.run_metadata()["machine"]["torch_threads"] == 1
+    finally:
+        torch.set_num_threads(before)
+
+
+def test_the_cli_refuses_a_bad_thread_count_without_a_traceback(tmp_path):
+    env = {**os.environ, "RLCORE_TORCH_THREADS": "many"}
+    proc = subprocess.run([sys.executable, "-m", "rlcore", "train", "ddpg", "--env", "Pendulum-v1", "--steps", "10",
+                           "--out", str(tmp_path / "run")], capture_output=True, text=True, env=env)
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines() == ["error: RLCORE_TORCH_THREADS='many': give a whole number of threads, 1 "
+                                                "or more"]

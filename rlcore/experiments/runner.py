@@ -53,11 +53,10 @@ def distributed_command(spec: RunSpec, seed: int, out: str | os.PathLike) -> lis
 
 def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:
     """Train (or resume) one seed and copy its small outputs to ``results``; returns a status line."""
-    import torch
-
     from rlcore.algos import get_algorithm
+    from rlcore.runs import torch_threads
 
-    torch.set_num_threads(1)
+    torch_threads()  # one per process unless RLCORE_TORCH_THREADS says more (one long run on an idle machine)
     work_dir, result_dir = run_paths(exp, spec.name, seed, results, work)
     if (result_dir / "policy.pt").exists():
         return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
