@@ -33,13 +33,14 @@ import torch
 OBS_DIM, ACT_DIM = 348, 17           # Humanoid-v5
 
 
-def learning_step_seconds(steps: int = 200) -> tuple[float, dict[str, object]]:
-    """Median seconds of one DDPG learning step (critic, actor, both soft updates) with the modern settings, and
-    the networks and optimizers it trained (what a checkpoint saves besides the memory)."""
+def learning_step_seconds(steps: int = 200, config=None) -> tuple[float, dict[str, object]]:
+    """Median seconds of one DDPG learning step (critic, actor, both soft updates) with ``config`` (the modern
+    settings, ``rlcore.ddpg.Config()``, if None) on Humanoid-shaped minibatches, and the networks and optimizers it
+    trained (what a checkpoint saves besides the memory)."""
     from rlcore.ddpg import Config, make_networks, make_optimizers, update_actor, update_critic
     from rlcore.nets import soft_update
 
-    config = Config()
+    config = Config() if config is None else config
     sp = {"obs_dim": OBS_DIM, "act_dim": ACT_DIM, "low": -0.4 * np.ones(ACT_DIM), "high": 0.4 * np.ones(ACT_DIM)}
     actor, critic, actor_t, critic_t = make_networks(sp, config)
     actor_opt, critic_opt = make_optimizers(actor, critic, config)
@@ -49,12 +50,12 @@ def learning_step_seconds(steps: int = 200) -> tuple[float, dict[str, object]]:
     times = []
     for _ in range(5):
         start = time.perf_counter()
-        for _ in range(steps // 5):
+        for _ in range(max(steps // 5, 1)):
             update_critic(critic, critic_opt, actor_t, critic_t, obs, act, rew, next_obs, term, config.gamma)
             update_actor(actor, actor_opt, critic, obs)
             soft_update(actor_t, actor, config.tau)
             soft_update(critic_t, critic, config.tau)
-        times.append((time.perf_counter() - start) / (steps // 5))
+        times.append((time.perf_counter() - start) / max(steps // 5, 1))
     return float(np.median(times)), {"actor": actor, "critic": critic, "actor_opt": actor_opt, "critic_opt": critic_opt}
 
 
