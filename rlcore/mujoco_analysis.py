@@ -6,7 +6,7 @@ A return is one number; these measurements say what earned it (chapter 5 uses th
 - :func:`pitch_rollout`: one episode with the torso's pitch angle at every step, to see a cheetah turn over
   (:attr:`Episode.on_back`, :attr:`Episode.first_flip`), and optionally some of its frames;
 - :func:`reward_anatomy`: a return split into the terms Gymnasium reports in ``info``, with falls and
-  actions at their bounds;
+  actions at their bounds, and :func:`anatomy_row` to show one as a table row;
 - :func:`fall_share`: how many of a run's late training episodes ended in a fall;
 - :func:`observation_scales` and :data:`HUMANOID_V5_OBSERVATION`: the size of each part of an observation;
 - :func:`tanh_saturation`: how many of a fresh actor's outputs sit where its final tanh is flat.
@@ -149,6 +149,18 @@ def reward_anatomy(policy: Policy, env_id: str, episodes: int, seed: int, terms:
     finally:
         env.close()
     return {k: float(np.mean([row[k] for row in rows])) for k in rows[0]}
+
+
+ANATOMY_COLUMNS = (("return", "return"), ("length", "length"), ("fell", "fell"), ("reward_forward", "forward"),
+                   ("reward_ctrl", "control cost"), ("reward_contact", "contact cost"), ("reward_survive", "healthy"),
+                   ("saturated", "actions at a bound"))
+
+
+def anatomy_row(anatomy: Mapping[str, float]) -> dict[str, str]:
+    """One table row of a :func:`reward_anatomy` result: the terms in whole numbers, falls and actions at a bound
+    in per cent, under the column names the book's tables use."""
+    return {column: (f"{100 * anatomy[key]:.0f} %" if key in ("fell", "saturated") else f"{anatomy[key]:,.0f}")
+            for key, column in ANATOMY_COLUMNS}
 
 
 def fall_share(progress_logs: Iterable[Mapping[str, np.ndarray]], last: int = 50_000, time_limit: int = 1000) -> float:

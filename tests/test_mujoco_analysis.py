@@ -1,7 +1,5 @@
 """rlcore.mujoco_analysis: small, fast cases with known answers."""
 
-import io
-
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -10,8 +8,8 @@ import torch
 from rlcore.ddpg import Actor
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
-from rlcore.mujoco_analysis import (HUMANOID_V5_OBSERVATION, Episode, fall_share, observation_scales, pitch_rollout,
-                                    reward_anatomy, tanh_saturation, zero_torque_returns)
+from rlcore.mujoco_analysis import (HUMANOID_V5_OBSERVATION, Episode, anatomy_row, fall_share, observation_scales,
+                                    pitch_rollout, reward_anatomy, tanh_saturation, zero_torque_returns)
 
 
 def test_zero_torque_returns_restarts_episodes_and_counts_every_step():
@@ -85,6 +83,16 @@ def test_reward_anatomy_terms_add_up_and_count_falls_and_bounds():
     assert c["saturated"] == pytest.approx(1.0) and "reward_forward" not in c
     with pytest.raises(ValueError):
         reward_anatomy(lambda obs: np.zeros(3), "Hopper-v5", episodes=0, seed=0)
+
+
+def test_an_anatomy_row_shows_terms_whole_and_shares_in_per_cent():
+    a = {"return": 1234.56, "length": 300.4, "fell": 0.8, "reward_forward": 12.3, "reward_ctrl": -45.6,
+         "reward_contact": -0.4, "reward_survive": 1500.0, "saturated": 0.666}
+    assert anatomy_row(a) == {"return": "1,235", "length": "300", "fell": "80 %", "forward": "12",
+                              "control cost": "-46", "contact cost": "-0", "healthy": "1,500",
+                              "actions at a bound": "67 %"}
+    with pytest.raises(KeyError):
+        anatomy_row({"return": 1.0})
 
 
 def test_fall_share_pools_the_late_episodes_of_every_seed():
