@@ -100,10 +100,6 @@ def main() -> None:
     except ValueError:
         raise SystemExit(f"--sizes takes comma-separated whole numbers, got {args.sizes!r}") from None
     torch.set_num_threads(1)
-
-    import rlcore
-    from rlcore.runs import git_commit
-
     step, nets = learning_step_seconds()
     Path(args.dir).mkdir(parents=True, exist_ok=True)
     rows = []
@@ -120,13 +116,28 @@ def main() -> None:
     record = {
         "benchmark": "checkpoint-cost", "env_id": "Humanoid-v5", "learning_step_seconds": step,
         "checkpoint_every": args.checkpoint_every, "episode_length": args.episode_length, "rows": rows,
-        "command": f"python benchmarks/checkpoint_cost.py --sizes {args.sizes} --episode-length {args.episode_length}",
-        "versions": {"rlcore": rlcore.__version__, "torch": torch.__version__, "numpy": np.__version__,
-                     "python": platform.python_version()},
-        "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(), "torch_threads": 1},
-        "commit": git_commit(),
+        **provenance(f"python benchmarks/checkpoint_cost.py --sizes {args.sizes} --episode-length "
+                     f"{args.episode_length}"),
     }
-    out = Path(args.out)
+    write_record(record, args.out)
+
+
+def provenance(command: str) -> dict[str, object]:
+    """What a record needs beside its numbers: the command, versions, machine (with torch's thread count) and
+    commit."""
+    import rlcore
+    from rlcore.runs import git_commit
+
+    return {"command": command,
+            "versions": {"rlcore": rlcore.__version__, "torch": torch.__version__, "numpy": np.__version__,
+                         "python": platform.python_version()},
+            "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(),
+                        "torch_threads": torch.get_num_threads()},
+            "commit": git_commit()}
+
+
+def write_record(record: dict[str, object], out: str | os.PathLike) -> None:
+    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(record, indent=2) + "\n")
     print(f"-> {out}")

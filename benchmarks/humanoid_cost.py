@@ -15,9 +15,7 @@ and to the setting's own budget: a lower bound, as the simulator and acting add 
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import sys
 from pathlib import Path
 
@@ -25,7 +23,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from checkpoint_cost import learning_step_seconds  # noqa: E402
+from checkpoint_cost import learning_step_seconds, provenance, write_record  # noqa: E402
 
 REFERENCE = ("ddpg-modern-1m", "humanoid")
 SETTINGS = (("ddpg-report-humanoid", "small"), ("ddpg-report-humanoid", "large"), REFERENCE)
@@ -49,9 +47,7 @@ def main() -> None:
         raise SystemExit("--repeats, --steps and --threads take whole numbers of 1 or more")
     torch.set_num_threads(args.threads)
 
-    import rlcore
     from rlcore.ddpg import make_config
-    from rlcore.runs import git_commit
 
     specs = humanoid_specs()
     configs = {key: make_config("ddpg", **spec.overrides) for key, spec in specs.items()}
@@ -76,22 +72,15 @@ def main() -> None:
     record = {
         "benchmark": "humanoid-cost", "env_id": "Humanoid-v5", "repeats": args.repeats, "steps": args.steps,
         "reference": "/".join(REFERENCE), "rows": rows,
-        "command": f"python benchmarks/humanoid_cost.py --repeats {args.repeats} --steps {args.steps}"
-                   + (f" --threads {args.threads}" if args.threads != 1 else ""),
-        "versions": {"rlcore": rlcore.__version__, "torch": torch.__version__, "numpy": np.__version__,
-                     "python": platform.python_version()},
-        "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(), "torch_threads": args.threads,
-                    "loadavg_start": list(load_start), "loadavg_end": list(os.getloadavg())},
-        "commit": git_commit(),
+        **provenance(f"python benchmarks/humanoid_cost.py --repeats {args.repeats} --steps {args.steps}"
+                     + (f" --threads {args.threads}" if args.threads != 1 else "")),
     }
+    record["machine"] |= {"loadavg_start": list(load_start), "loadavg_end": list(os.getloadavg())}
     for row in rows:
         print(f"{row['experiment']}/{row['run']}: {1e3 * row['seconds_per_learning_step']:.1f} ms "
               f"({row['ratio_to_modern']:.1f}x the modern settings), {row['core_hours_to_1m']:.1f} core-hours to 1M "
               f"steps, {row['core_hours_to_budget']:.1f} to its {row['steps']:,}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(record, indent=2) + "\n")
-    print(f"-> {out}")
+    write_record(record, args.out)
 
 
 if __name__ == "__main__":

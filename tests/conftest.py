@@ -1,6 +1,11 @@
 """Shared test fixtures."""
 
+import importlib.util
+from pathlib import Path
+
 import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -50,3 +55,17 @@ def interrupt_at_first_checkpoint(monkeypatch):
         return calls
 
     return arm
+
+
+@pytest.fixture
+def script_module():
+    """Load a script that is not part of a package (``benchmarks/checkpoint_cost.py``) as a module, fresh each call:
+    ``script_module("benchmarks/checkpoint_cost.py").main()``."""
+    def load(relative_path: str):
+        path = ROOT / relative_path
+        spec = importlib.util.spec_from_file_location(path.stem, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load

@@ -1,5 +1,4 @@
 """benchmarks/checkpoint_cost.py on tiny memories: what it records, and its one-line error on bad input."""
-import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -9,18 +8,11 @@ import pytest
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "checkpoint_cost.py"
 
 
-def _module():
-    spec = importlib.util.spec_from_file_location("checkpoint_cost", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_records_size_time_and_share_per_memory_size(tmp_path, monkeypatch, capsys):
+def test_records_size_time_and_share_per_memory_size(tmp_path, monkeypatch, capsys, script_module):
     out = tmp_path / "cost.json"
     monkeypatch.setattr(sys, "argv", [str(SCRIPT), "--sizes", "200,20000", "--episode-length", "50",
                                       "--dir", str(tmp_path / "work"), "--out", str(out)])
-    _module().main()
+    script_module("benchmarks/checkpoint_cost.py").main()
     record = json.loads(out.read_text())
     small, large = record["rows"]
     assert (small["transitions"], large["transitions"]) == (200, 20_000) and record["episode_length"] == 50
@@ -31,8 +23,8 @@ def test_records_size_time_and_share_per_memory_size(tmp_path, monkeypatch, caps
     assert "20,000 transitions" in capsys.readouterr().out
 
 
-def test_bad_sizes_exit_with_one_line(monkeypatch):
+def test_bad_sizes_exit_with_one_line(monkeypatch, script_module):
     monkeypatch.setattr(sys, "argv", [str(SCRIPT), "--sizes", "a lot"])
     with pytest.raises(SystemExit) as stop:
-        _module().main()
+        script_module("benchmarks/checkpoint_cost.py").main()
     assert "comma-separated whole numbers" in str(stop.value.code)

@@ -1,5 +1,4 @@
 """benchmarks/humanoid_cost.py with a few learning steps: what it records, and its one-line error on bad input."""
-import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -9,17 +8,10 @@ import pytest
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "humanoid_cost.py"
 
 
-def _module():
-    spec = importlib.util.spec_from_file_location("humanoid_cost", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_records_each_humanoid_setting_against_the_modern_one(tmp_path, monkeypatch, capsys):
+def test_records_each_humanoid_setting_against_the_modern_one(tmp_path, monkeypatch, capsys, script_module):
     out = tmp_path / "cost.json"
     monkeypatch.setattr(sys, "argv", [str(SCRIPT), "--repeats", "1", "--steps", "2", "--out", str(out)])
-    _module().main()
+    script_module("benchmarks/humanoid_cost.py").main()
     record = json.loads(out.read_text())
     rows = {(r["experiment"], r["run"]): r for r in record["rows"]}
     assert set(rows) == {("ddpg-report-humanoid", "small"), ("ddpg-report-humanoid", "large"),
@@ -36,12 +28,14 @@ def test_records_each_humanoid_setting_against_the_modern_one(tmp_path, monkeypa
         assert r["core_hours_to_1m"] == pytest.approx(r["seconds_per_learning_step"] * 1e6 / 3600)
         assert 0 < r["core_hours_to_budget"] < r["seconds_per_learning_step"] * r["steps"] / 3600
     assert record["command"] == "python benchmarks/humanoid_cost.py --repeats 1 --steps 2"
+    assert record["machine"]["torch_threads"] == 1 and len(record["machine"]["loadavg_end"]) == 3
+    assert record["versions"]["torch"] and record["commit"]
     assert "core-hours to 1M steps" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("flag", ["--repeats", "--steps", "--threads"])
-def test_a_count_below_one_exits_with_one_line(flag, monkeypatch):
+def test_a_count_below_one_exits_with_one_line(flag, monkeypatch, script_module):
     monkeypatch.setattr(sys, "argv", [str(SCRIPT), flag, "0"])
     with pytest.raises(SystemExit) as stop:
-        _module().main()
+        script_module("benchmarks/humanoid_cost.py").main()
     assert "whole numbers of 1 or more" in str(stop.value.code)
