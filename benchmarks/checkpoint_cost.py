@@ -47,15 +47,15 @@ def learning_step_seconds(steps: int = 200, config=None) -> tuple[float, dict[st
     b = config.batch_size
     obs, next_obs = torch.randn(b, OBS_DIM), torch.randn(b, OBS_DIM)
     act, rew, term = torch.rand(b, ACT_DIM) * 0.8 - 0.4, torch.randn(b), torch.zeros(b)
-    times = []
+    times, per_round = [], max(steps // 5, 1)
     for _ in range(5):
         start = time.perf_counter()
-        for _ in range(max(steps // 5, 1)):
+        for _ in range(per_round):
             update_critic(critic, critic_opt, actor_t, critic_t, obs, act, rew, next_obs, term, config.gamma)
             update_actor(actor, actor_opt, critic, obs)
             soft_update(actor_t, actor, config.tau)
             soft_update(critic_t, critic, config.tau)
-        times.append((time.perf_counter() - start) / max(steps // 5, 1))
+        times.append((time.perf_counter() - start) / per_round)
     return float(np.median(times)), {"actor": actor, "critic": critic, "actor_opt": actor_opt, "critic_opt": critic_opt}
 
 

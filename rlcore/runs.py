@@ -173,24 +173,20 @@ def command_line() -> str | None:
     return shlex.join([*head, *sys.argv[1:]])
 
 
-def _torch_threads_now() -> int:
-    import torch
-
-    return torch.get_num_threads()
-
-
 def run_metadata(**extra: Any) -> dict[str, Any]:
     """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``.
 
     ``commit`` is :data:`LOADED_COMMIT`, the code this process runs; ``checkout_at_start`` is added when the
     checkout has moved on since this process loaded it.
     """
+    import torch
+
     meta = {
         "command": command_line(),
         "versions": versions(),
         "commit": LOADED_COMMIT,
         "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count(),
-                    "torch_threads": _torch_threads_now()},
+                    "torch_threads": torch.get_num_threads()},
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **extra,
     }
