@@ -252,13 +252,13 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
 
     run = Run("ddpg", env_id, config, steps, seed, out, progress, desc=f"DDPG {env_id}", close=(env, eval_env),
               evaluate=lambda: evaluation(saved_policy(actor, scaler), eval_env, config.eval_episodes, seed + 10_000),
-              episode_log=EPISODE_COLUMNS + ["noise_sigma"])
+              episode_log=EPISODE_COLUMNS + ["noise_sigma"], defer_interrupts=True)
     run.track(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
               critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
               torch_rng=torch_rng(), noise=exploration_state(noise, param_noise, actor), spaces=sp,
               obs=running_stats(scaler.rms, "obs", scaler.loaded) if scaler is not None else None)
     step, episode = run.resume(step=0, episode=0)
-    obs, _ = env.reset(seed=episode_seed(seed, episode))
+    obs = run.resume_episode(env, reset_seed=episode_seed(seed, episode), observation=lambda: obs)
     behaviour = first_behaviour(actor, param_noise)
     with run:
         while step < steps:

@@ -274,14 +274,15 @@ def train(
               schedules="epsilon schedule" + (" and PER's beta" if config.prioritized else ""),
               meta={"variant": config.variant}, close=(env, eval_env),
               evaluate=lambda: evaluate_q(q, eval_env, config.eval_episodes, seed + 10_000, config.gamma),
-              episode_log=EPISODE_COLUMNS + ["epsilon"], eval_log=EVAL_COLUMNS + ["q_start", "discounted_return_start"])
+              episode_log=EPISODE_COLUMNS + ["epsilon"], eval_log=EVAL_COLUMNS + ["q_start", "discounted_return_start"],
+              defer_interrupts=True)
     run.track(q=q, q_target=q_target, optimizer=optimizer, replay=buffer if config.replay_in_checkpoint else None,
               rng=rng, torch_rng=torch_rng())
     step, episode = run.resume(step=0, episode=0)
     # [dqn-schedule]
     decay_steps = int(config.exploration_fraction * steps)
     # [/dqn-schedule]
-    obs, _ = env.reset(seed=episode_seed(seed, episode))
+    obs = run.resume_episode(env, reset_seed=episode_seed(seed, episode), observation=lambda: obs)
     with run:
         while step < steps:
             # [dqn-act]

@@ -185,3 +185,70 @@ def env_setting(env_id: str, name: str) -> Any:
         raise ValueError(f"{env_id} has no setting {name!r} with a default; its settings: "
                          f"{', '.join(p for p in params if p not in ('self', 'kwargs'))}")
     return params[name].default
+
+
+# --- an episode in progress, in a checkpoint ------------------------------------------------------
+
+EPISODE_COUNTERS = ("_elapsed_steps", "episode_returns", "episode_lengths")
+"""What a wrapper counts within an episode (TimeLimit; RecordEpisodeStatistics's return and length so far)."""
+CLASSIC_STATE = ("state", "steps_beyond_terminated", "last_u")
+"""What a classic-control task keeps between steps (CartPole, Pendulum, MountainCar, Acrobot)."""
+
+
+def _chain(env: Any) -> list[Any]:
+    """``env``'s wrappers, outermost first, and the environment itself last."""
+    chain = [env]
+    while isinstance(chain[-1], gym.Wrapper):
+        chain.append(chain[-1].env)
+    return chain
+
+
+def episode_state(env: gym.Env) -> dict[str, Any] | None:
+    """What it takes to go on with ``env``'s episode in progress, bit for bit, in a fresh copy of the environment
+    (:func:`restore_episode`): the simulator's state, each wrapper's counters, the environment's generator. For
+    a MuJoCo task the simulator's state is MuJoCo's whole ``MjData`` (about 0.7 MB: the next step reads some of
+    its derived quantities, the centre of mass for one, as the last step left them); for a classic-control task,
+    its state vector. None where the simulator cannot be saved (Box2D's LunarLander, say): a resumed run then
+    starts a new episode."""
+    chain = _chain(env)
+    base = chain[-1]
+    if hasattr(base, "data") and type(base).__module__.startswith("gymnasium.envs.mujoco"):
+        simulator = {"mujoco_data": np.frombuffer(base.data.__getstate__(), dtype=np.uint8).copy()}
+    elif type(base).__module__.startswith("gymnasium.envs.classic_control"):
+        simulator = {k: (None if v is None else np.array(v)) for k, v in vars(base).items() if k in CLASSIC_STATE}
+    else:
+        return None
+    return {"wrappers": [type(w).__name__ for w in chain[:-1]],
+            "counters": [{k: v for k, v in vars(w).items() if k in EPISODE_COUNTERS} for w in chain[:-1]],
+            "np_random": base.np_random.bit_generator.state, **simulator}
+
+
+def restore_episode(env: gym.Env, state: dict[str, Any]) -> bool:
+    """Put ``env``, just reset, into the episode in progress that :func:`episode_state` saved; False (and ``env``
+    left as reset) where the state does not fit this environment: other wrappers, or another MuJoCo model."""
+    chain = _chain(env)
+    base = chain[-1]
+    if [type(w).__name__ for w in chain[:-1]] != list(state["wrappers"]):
+        return False
+    if "mujoco_data" in state:
+        import mujoco
+
+        if not hasattr(base, "data"):
+            return False
+        saved = mujoco.MjData.__new__(mujoco.MjData)
+        saved.__setstate__(np.asarray(state["mujoco_data"], dtype=np.uint8).tobytes())
+        sizes = ("nq", "nv", "nu", "na", "nbody", "ngeom")
+        if any(getattr(saved.model, s) != getattr(base.model, s) for s in sizes):
+            return False
+        mujoco.mj_copyData(base.data, base.model, saved)
+    else:
+        for key in CLASSIC_STATE:
+            if key in state:
+                value = state[key]
+                setattr(base, key, None if value is None else np.asarray(value).copy() if np.ndim(value) else
+                        np.asarray(value).item())
+    for wrapper, counters in zip(chain[:-1], state["counters"]):
+        for key, value in counters.items():
+            setattr(wrapper, key, value)
+    base.np_random.bit_generator.state = state["np_random"]
+    return True

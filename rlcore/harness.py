@@ -8,7 +8,10 @@ its loop, which reads like the algorithm box in its module's docstring. The :cla
 - what a checkpoint saves and a resume restores: the algorithm registers it once with :meth:`Run.track`
   (networks, optimizers, replay memories, random generators, normalizer statistics);
 - the progress bar, the per-episode log, periodic evaluation of the deterministic policy, periodic
-  checkpoints, a checkpoint at the end, and one on Ctrl-C or SIGTERM (see :func:`rlcore.runs.stop_on_signals`).
+  checkpoints, a checkpoint at the end, and one on Ctrl-C or SIGTERM (see :func:`rlcore.runs.stop_on_signals`);
+- the episode in progress (:meth:`Run.resume_episode`): a checkpoint taken between two steps holds it, and a run
+  resumed from it goes on with that episode, so that it is the uninterrupted run; with ``defer_interrupts``
+  Ctrl-C and SIGTERM stop the loop between two steps too, not in the middle of one.
 
 A loop tells the run where it is with :meth:`Run.record_episode` (an episode ended) and :meth:`Run.step_done`
 (the step counter moved on); the run decides what is due. A typical ``train``::
@@ -16,6 +19,7 @@ A loop tells the run where it is with :meth:`Run.record_episode` (an episode end
     run = Run("ddpg", env_id, config, steps, seed, out, progress, evaluate=..., close=(env, eval_env))
     run.track(actor=actor, critic=critic, actor_opt=actor_opt, rng=rng, torch_rng=torch_rng())
     step, episode = run.resume(step=0, episode=0)
+    obs = run.resume_episode(env, reset_seed=seed, observation=lambda: obs)
     with run:                      # progress bar; checkpoint at the end, or on Ctrl-C
         while step < steps:
             ...                    # the algorithm
@@ -26,6 +30,8 @@ A loop tells the run where it is with :meth:`Run.record_episode` (an episode end
 from __future__ import annotations
 
 import os
+import signal
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -34,6 +40,7 @@ import torch
 from tqdm import tqdm
 
 from rlcore.checkpoint import Saved, load_running_stats, running_stats_state, save_checkpoint  # noqa: F401
+from rlcore.envs import episode_state, restore_episode
 from rlcore.logger import CSVLogger
 from rlcore.runs import RunDir, config_dict, open_run
 
@@ -81,6 +88,10 @@ class Run:
     the counter whose multiples of ``checkpoint_every`` (default ``config.checkpoint_every``) are checkpointed.
     ``close``: environments to close at the end. ``opened``: an already opened ``(RunDir, checkpoint)``
     (data-parallel training opens the folder on one worker only). ``meta``: extra fields for ``meta.json``.
+    ``defer_interrupts``: inside ``with run``, a SIGINT or SIGTERM that would interrupt the process stops the
+    loop at the end of its current step (:meth:`step_done`) instead of wherever it is, so that the checkpoint it
+    writes is one between two steps (for loops whose step is short; data-parallel workers, which must stop
+    together, leave it off).
     """
 
     def __init__(self, algo: str, env_id: str, config: Any, steps: int, seed: int, out: str | os.PathLike | None = None,
@@ -89,7 +100,8 @@ class Run:
                  episode_log: list[str] | None = EPISODE_COLUMNS, eval_log: list[str] = EVAL_COLUMNS,
                  logs: dict[str, list[str]] | None = None, checkpoint_on: str = "step",
                  checkpoint_every: int | None = None, checkpoint_on_interrupt: bool = True, close: tuple = (),
-                 opened: tuple[RunDir | None, dict[str, Any] | None] | None = None, meta: dict[str, Any] | None = None):
+                 opened: tuple[RunDir | None, dict[str, Any] | None] | None = None, meta: dict[str, Any] | None = None,
+                 defer_interrupts: bool = False):
         self.algo, self.env_id, self.config, self.steps, self.seed = algo, env_id, config, steps, seed
         self.target = steps if target is None else target
         self.desc, self.progress, self.evaluate, self.eval_at_end = desc, progress, evaluate, eval_at_end
@@ -112,6 +124,11 @@ class Run:
         self.evals: list[dict[str, float]] = []
         self.logs: dict[str, CSVLogger] = {}
         self._saved_at: dict[str, Any] | None = None
+        self.defer_interrupts = defer_interrupts
+        self._episode: tuple[Any, Callable[[], Any]] | None = None
+        self._stop_requested = False
+        self._stopped_between_steps = False
+        self._handlers: dict[int, Any] = {}
         self.bar: tqdm | None = None
         if self.folder is not None:
             wanted = {**({"progress": episode_log} if episode_log else {}), **(logs or {})}
@@ -155,8 +172,21 @@ class Run:
         values = tuple(counters.values())
         return values[0] if len(values) == 1 else values
 
-    def state(self) -> dict[str, Any]:
-        """The checkpoint's contents now."""
+    def resume_episode(self, env: Any, reset_seed: int, observation: Callable[[], Any]) -> Any:
+        """The observation the loop acts on first: the checkpoint's episode in progress, put back into ``env``
+        (:func:`rlcore.envs.restore_episode`), or where there is none, or it cannot be, a new episode
+        (``env.reset(seed=reset_seed)``). From now on a checkpoint taken between two steps holds ``env``'s episode
+        in progress and ``observation()``, the observation the loop is about to act on."""
+        obs, _ = env.reset(seed=reset_seed)
+        self._episode = (env, observation)
+        saved = None if self.ckpt is None else self.ckpt.get("episode_env")
+        if saved is not None and restore_episode(env, saved):
+            return np.asarray(saved["obs"]).copy()
+        return obs
+
+    def state(self, episode: bool = True) -> dict[str, Any]:
+        """The checkpoint's contents now; with ``episode``, the episode in progress too (between two steps only:
+        elsewhere the simulator may be a step ahead of the observation)."""
         state = {"algo": self.algo, "env_id": self.env_id, "seed": self.seed, "config": config_dict(self.config),
                  "total_steps": self.steps, "complete": self.counters.get("step", 0) >= self.target,
                  "episode": self.episode, **self.counters, **self.constants}
@@ -167,13 +197,18 @@ class Run:
                 state[key] = value.bit_generator.state
             else:
                 state[key] = value.state_dict()
+        if episode and self._episode is not None:
+            env, observation = self._episode
+            ongoing = episode_state(env)
+            if ongoing is not None:
+                state["episode_env"] = {**ongoing, "obs": np.array(observation())}
         return state
 
-    def checkpoint(self) -> None:
-        """Write ``checkpoint.pt`` (atomically) if the run has a folder."""
+    def checkpoint(self, episode: bool = True) -> None:
+        """Write ``checkpoint.pt`` (atomically) if the run has a folder; ``episode``: see :meth:`state`."""
         if self.folder is None:
             return
-        save_checkpoint(self.folder.checkpoint, self.state())
+        save_checkpoint(self.folder.checkpoint, self.state(episode))
         self._saved_at = dict(self.counters)
 
     # --- what the loop reports -------------------------------------------------------------------
@@ -208,6 +243,9 @@ class Run:
             self.checkpoint()
         if self.bar is not None:
             self.bar.update(step - before)
+        if self._stop_requested:  # a deferred Ctrl-C or SIGTERM: stop here, between two steps
+            self._stopped_between_steps = True
+            raise KeyboardInterrupt
 
     def evaluate_now(self, step: int) -> dict[str, float]:
         """Evaluate now: a row of ``eval.csv``; every tracked network (and each of its parts) goes back to the
@@ -226,14 +264,36 @@ class Run:
     def __enter__(self) -> Run:
         start = min(self.counters.get("step", 0), self.target)
         self.bar = tqdm(total=self.target, initial=start, disable=not self.progress, unit="step", desc=self.desc)
+        if self.defer_interrupts:
+            self._defer_signals()
         return self
+
+    def _defer_signals(self) -> None:
+        """Turn SIGINT and SIGTERM, where they would raise KeyboardInterrupt (a Python handler), into a request
+        that :meth:`step_done` honours; an ignored or default-handled signal is left as it is. Only the main
+        thread can set handlers: elsewhere interrupts stay immediate."""
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous = signal.getsignal(sig)
+            if callable(previous):
+                self._handlers[sig] = previous
+                signal.signal(sig, self._request_stop)
+
+    def _request_stop(self, signum: int, frame: Any) -> None:
+        self._stop_requested = True
 
     def __exit__(self, kind: type | None, exc: BaseException | None, tb: Any) -> None:
         try:
             if kind is None or (kind is KeyboardInterrupt and self.checkpoint_on_interrupt):
                 if self._saved_at != self.counters:
-                    self.checkpoint()
+                    # an interrupt in the middle of a step leaves the simulator ahead of the loop's observation:
+                    # such a checkpoint holds no episode, and a resumed run starts a new one
+                    self.checkpoint(episode=kind is None or self._stopped_between_steps)
         finally:
+            for sig, handler in self._handlers.items():
+                signal.signal(sig, handler)
+            self._handlers.clear()
             if self.bar is not None:
                 self.bar.close()
             for env in self.to_close:
@@ -241,6 +301,8 @@ class Run:
                     env.close()
             for log in self.logs.values():
                 log.close()
+        if kind is None and self._stop_requested:  # the signal came as the loop ended: the caller stops too
+            raise KeyboardInterrupt
 
     # --- what train returns ------------------------------------------------------------------------
 

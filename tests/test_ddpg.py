@@ -147,6 +147,61 @@ def test_a_run_stopped_at_an_episode_end_and_resumed_is_the_uninterrupted_run(tm
     np.testing.assert_array_equal(whole.episode_returns[2:], resumed.episode_returns)
 
 
+@pytest.mark.parametrize("env_id,stop,steps", [("Pendulum-v1", 450, 700), ("Hopper-v5", 317, 500)])
+def test_a_run_stopped_in_the_middle_of_an_episode_and_resumed_is_the_uninterrupted_run(tmp_path, env_id, stop,
+                                                                                          steps):
+    from rlcore.checkpoint import load_checkpoint
+
+    torch.set_num_threads(1)
+    cfg = Config(exploration="ou", normalize_obs=True, **{**SMALL, "learning_starts": 100, "checkpoint_every": 100_000})
+    whole = train(env_id, cfg, steps=steps, seed=3, out=tmp_path / "whole")
+    train(env_id, cfg, steps=stop, seed=3, out=tmp_path / "parts")
+    ongoing = load_checkpoint(tmp_path / "parts" / "checkpoint.pt")["episode_env"]
+    assert 0 < ongoing["counters"][1]["_elapsed_steps"]  # TimeLimit's: the checkpoint is in the middle of one
+    resumed = train(env_id, cfg, steps=steps, seed=3, out=tmp_path / "parts")
+    for key, value in whole.actor.state_dict().items():
+        assert torch.equal(value, resumed.actor.state_dict()[key]), key
+    done = len(whole.episode_returns) - len(resumed.episode_returns)  # episodes ended before the stop
+    np.testing.assert_array_equal(whole.episode_returns[done:], resumed.episode_returns)
+    assert whole.episode_end_steps[done - 1] < stop < whole.episode_end_steps[done]
+
+
+def test_ctrl_c_in_the_middle_of_a_step_stops_after_it_and_the_resumed_run_is_the_uninterrupted_one(tmp_path,
+                                                                                                   monkeypatch):
+    import os
+    import signal
+
+    import rlcore.ddpg
+    from rlcore.checkpoint import load_checkpoint
+
+    torch.set_num_threads(1)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal or a notebook
+    try:
+        cfg = Config(**{**SMALL, "learning_starts": 100, "checkpoint_every": 100_000})
+        whole = train("Hopper-v5", cfg, steps=400, seed=4, out=tmp_path / "whole")
+        real, calls = rlcore.ddpg.update_actor, []
+
+        def ctrl_c_between_the_critic_and_the_actor(*args, **kwargs):
+            calls.append(1)
+            if len(calls) == 151:  # the learning step of step 250 (the first is step 100), half done
+                os.kill(os.getpid(), signal.SIGINT)
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(rlcore.ddpg, "update_actor", ctrl_c_between_the_critic_and_the_actor)
+        with pytest.raises(KeyboardInterrupt):
+            train("Hopper-v5", cfg, steps=400, seed=4, out=tmp_path / "parts")
+        monkeypatch.setattr(rlcore.ddpg, "update_actor", real)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the run's own handler is gone
+        ckpt = load_checkpoint(tmp_path / "parts" / "checkpoint.pt")
+        assert ckpt["step"] == 250 and "episode_env" in ckpt and len(ckpt["replay"]["rewards"]) == 250
+        resumed = train("Hopper-v5", cfg, steps=400, seed=4, out=tmp_path / "parts")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    for key, value in whole.actor.state_dict().items():
+        assert torch.equal(value, resumed.actor.state_dict()[key]), key
+    assert whole.episode_returns[-1] == resumed.episode_returns[-1]
+
+
 def test_resume_continues_from_the_checkpoint(tmp_path):
     torch.set_num_threads(1)
     from rlcore.checkpoint import load_checkpoint

@@ -106,3 +106,62 @@ def test_env_setting_reads_registered_and_default_settings_without_private_attri
     assert env_setting("FrozenLake-v1", "map_name") == "4x4"  # a registration's own keyword argument
     with pytest.raises(ValueError, match="no setting 'nope'"):
         env_setting("Hopper-v5", "nope")
+
+
+def _steps(env, actions):
+    """(observation, reward, terminated, truncated, info["episode"]) of each step until the episode ends."""
+    out = []
+    for action in actions:
+        obs, reward, terminated, truncated, info = env.step(action)
+        episode = info.get("episode")
+        out.append((obs.copy(), float(reward), terminated, truncated,
+                    None if episode is None else (float(episode["r"]), int(episode["l"]))))
+        if terminated or truncated:
+            break
+    return out
+
+
+@pytest.mark.parametrize("env_id,cut", [("Hopper-v5", 9), ("Humanoid-v5", 4), ("CartPole-v1", 6),
+                                        ("Pendulum-v1", 50)])
+def test_an_episode_in_progress_goes_on_bit_for_bit_in_a_fresh_environment_through_a_checkpoint(tmp_path, env_id,
+                                                                                                cut):
+    from rlcore.checkpoint import load_checkpoint, save_checkpoint
+    from rlcore.envs import episode_state, restore_episode
+
+    env = make_env(env_id, seed=0)
+    env.reset(seed=5)
+    env.action_space.seed(1)
+    actions = [env.action_space.sample() for _ in range(300)]
+    if env_id == "Humanoid-v5":  # gentle actions, so that it stands for a while
+        actions = [0.05 * a for a in actions]
+    _steps(env, actions[:cut])
+    save_checkpoint(tmp_path / "ckpt.pt", {"episode_env": episode_state(env)})  # read back with weights_only
+    uninterrupted = _steps(env, actions[cut:])
+    fresh = make_env(env_id, seed=0)
+    fresh.reset(seed=99)  # another start state: all of it must be overwritten
+    assert restore_episode(fresh, load_checkpoint(tmp_path / "ckpt.pt")["episode_env"])
+    resumed = _steps(fresh, actions[cut:])
+    assert len(resumed) == len(uninterrupted) > 1
+    for a, b in zip(uninterrupted, resumed):
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:] == b[1:]
+    assert resumed[-1][4] is not None and resumed[-1][4][1] == cut + len(resumed)  # the length counts from the start
+
+
+def test_an_episode_that_cannot_be_saved_or_does_not_fit_is_said_so():
+    from rlcore.envs import episode_state, restore_episode
+
+    lander = make_env("LunarLander-v3", seed=0)
+    lander.reset(seed=0)
+    assert episode_state(lander) is None  # Box2D's world cannot be saved: a resumed run starts a new episode
+    hopper = make_env("Hopper-v5", seed=0)
+    hopper.reset(seed=0)
+    state = episode_state(hopper)
+    cheetah = make_env("HalfCheetah-v5", seed=0)
+    cheetah.reset(seed=0)
+    before = cheetah.unwrapped.data.qpos.copy()
+    assert not restore_episode(cheetah, state)  # another MuJoCo model
+    np.testing.assert_array_equal(cheetah.unwrapped.data.qpos, before)
+    bare = gym.make("Hopper-v5")
+    bare.reset(seed=0)
+    assert not restore_episode(bare, state)  # other wrappers (no episode statistics)
