@@ -195,12 +195,42 @@ CLASSIC_STATE = ("state", "steps_beyond_terminated", "last_u")
 """What a classic-control task keeps between steps (CartPole, Pendulum, MountainCar, Acrobot)."""
 
 
+VECTOR_COUNTERS = ("accumulated_reward", "_prev_dones", "episode_returns", "episode_lengths", "prev_dones")
+"""What a vector wrapper keeps between steps (NormalizeReward's discounted return so far; RecordEpisodeStatistics's)."""
+
+
 def _chain(env: Any) -> list[Any]:
     """``env``'s wrappers, outermost first, and the environment itself last."""
     chain = [env]
-    while isinstance(chain[-1], gym.Wrapper):
+    while isinstance(chain[-1], (gym.Wrapper, gym.vector.VectorWrapper)):
         chain.append(chain[-1].env)
     return chain
+
+
+def _vector_episode_state(chain: list[Any]) -> dict[str, Any] | None:
+    """:func:`episode_state` of a :class:`gymnasium.vector.SyncVectorEnv` (with its vector wrappers): each copy's
+    episode, which copies reset on their next step, and the wrappers' counters."""
+    base = chain[-1]
+    if not isinstance(base, gym.vector.SyncVectorEnv):
+        return None  # an AsyncVectorEnv's copies live in other processes
+    copies = [episode_state(env) for env in base.envs]
+    if any(c is None for c in copies):
+        return None
+    return {"wrappers": [type(w).__name__ for w in chain[:-1]],
+            "counters": [{k: np.array(v) for k, v in vars(w).items() if k in VECTOR_COUNTERS} for w in chain[:-1]],
+            "autoreset": np.array(base._autoreset_envs), "copies": copies}
+
+
+def _array(value: Any) -> np.ndarray:
+    """A NumPy copy of an array that a checkpoint may have stored as a tensor."""
+    return value.numpy().copy() if isinstance(value, torch.Tensor) else np.array(value)
+
+
+def pending_resets(envs: gym.vector.VectorEnv) -> np.ndarray:
+    """Which copies of ``envs`` ended an episode on the last step, and so reset on the next one (Gymnasium's
+    next-step autoreset): False for all just after ``envs.reset``."""
+    base = _chain(envs)[-1]
+    return np.array(getattr(base, "_autoreset_envs", np.zeros(envs.num_envs, dtype=bool)), dtype=bool)
 
 
 def episode_state(env: gym.Env) -> dict[str, Any] | None:
@@ -209,9 +239,12 @@ def episode_state(env: gym.Env) -> dict[str, Any] | None:
     a MuJoCo task the simulator's state is MuJoCo's whole ``MjData`` (about 0.7 MB: the next step reads some of
     its derived quantities, the centre of mass for one, as the last step left them); for a classic-control task,
     its state vector. None where the simulator cannot be saved (Box2D's LunarLander, say): a resumed run then
-    starts a new episode."""
+    starts a new episode. For a vector environment (synchronous), each copy's, with the vector wrappers' counters.
+    """
     chain = _chain(env)
     base = chain[-1]
+    if isinstance(base, gym.vector.VectorEnv):
+        return _vector_episode_state(chain)
     if hasattr(base, "data") and type(base).__module__.startswith("gymnasium.envs.mujoco"):
         simulator = {"mujoco_data": np.frombuffer(base.data.__getstate__(), dtype=np.uint8).copy()}
     elif type(base).__module__.startswith("gymnasium.envs.classic_control"):
@@ -230,6 +263,20 @@ def restore_episode(env: gym.Env, state: dict[str, Any]) -> bool:
     base = chain[-1]
     if [type(w).__name__ for w in chain[:-1]] != list(state["wrappers"]):
         return False
+    if "copies" in state:
+        if not isinstance(base, gym.vector.SyncVectorEnv) or len(base.envs) != len(state["copies"]):
+            return False
+        before = [episode_state(e) for e in base.envs]
+        for i, (copy, saved) in enumerate(zip(base.envs, state["copies"])):
+            if not restore_episode(copy, saved):
+                for earlier, undo in zip(base.envs[:i], before):  # leave env as reset
+                    restore_episode(earlier, undo)
+                return False
+        base._autoreset_envs = _array(state["autoreset"]).astype(bool)
+        for wrapper, counters in zip(chain[:-1], state["counters"]):
+            for key, value in counters.items():
+                setattr(wrapper, key, _array(value))
+        return True
     if "mujoco_data" in state:
         import mujoco
 

@@ -90,7 +90,7 @@ class Run:
     (data-parallel training opens the folder on one worker only). ``meta``: extra fields for ``meta.json``.
     ``defer_interrupts``: inside ``with run``, a SIGINT or SIGTERM that would interrupt the process stops the
     loop at the end of its current step (:meth:`step_done`) instead of wherever it is, so that the checkpoint it
-    writes is one between two steps (for loops whose step is short; data-parallel workers, which must stop
+    writes is one between two steps; a second one stops at once (data-parallel workers, which must stop
     together, leave it off).
     """
 
@@ -176,11 +176,16 @@ class Run:
         """The observation the loop acts on first: the checkpoint's episode in progress, put back into ``env``
         (:func:`rlcore.envs.restore_episode`), or where there is none, or it cannot be, a new episode
         (``env.reset(seed=reset_seed)``). From now on a checkpoint taken between two steps holds ``env``'s episode
-        in progress and ``observation()``, the observation the loop is about to act on."""
+        in progress and ``observation()``, the observation the loop is about to act on. What the reset changed
+        in the tracked statistics (a normalizer wrapper counts the first observation) goes back as the checkpoint
+        has it."""
         obs, _ = env.reset(seed=reset_seed)
         self._episode = (env, observation)
         saved = None if self.ckpt is None else self.ckpt.get("episode_env")
         if saved is not None and restore_episode(env, saved):
+            for value in self.tracked.values():
+                if isinstance(value, Saved):
+                    value.load(self.ckpt)
             return np.asarray(saved["obs"]).copy()
         return obs
 
@@ -281,7 +286,11 @@ class Run:
                 signal.signal(sig, self._request_stop)
 
     def _request_stop(self, signum: int, frame: Any) -> None:
+        if self._stop_requested:  # a second one: stop now, in the middle of the step
+            raise KeyboardInterrupt
         self._stop_requested = True
+        tqdm.write(f"{signal.Signals(signum).name}: stopping at the end of this step, with a checkpoint "
+                   "(again to stop at once)")
 
     def __exit__(self, kind: type | None, exc: BaseException | None, tb: Any) -> None:
         try:

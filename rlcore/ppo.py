@@ -34,7 +34,7 @@ from torch import nn
 from rlcore.buffers import gae
 from rlcore.checkpoint import load_checkpoint
 from rlcore.config import check_budget, check_config
-from rlcore.envs import make_env
+from rlcore.envs import make_env, pending_resets
 from rlcore.harness import Run, evaluation, running_stats, torch_rng
 from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, PPOPolicy, Rollout, annealing,  # noqa: F401
                              check_spaces, collect_rollout, deterministic_policy, make_agent, make_envs, normalize,
@@ -264,7 +264,7 @@ def train(
               target=iterations * per_iter, schedules=annealing(config), eval_at_end=True, close=(envs, eval_env),
               evaluate=lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
                                           config.eval_episodes, seed + 10_000),
-              logs={"updates": UPDATE_COLUMNS})
+              logs={"updates": UPDATE_COLUMNS}, defer_interrupts=True)
     run.track(agent=agent, optimizer=optimizer, rng=rng, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
               ret=running_stats(ret_rms, "ret"), spaces=spaces, obs_clip=OBS_CLIP)
     step, iteration, kl_coef = run.resume(step=0, iteration=0, kl_coef=config.kl_coef)
@@ -273,7 +273,8 @@ def train(
     def on_episode(t: int, episode_return: float, length: int) -> None:  # an episode ended at rollout step t
         run.record_episode(step + (t + 1) * config.num_envs, episode_return, length)
 
-    obs, _ = envs.reset(seed=seed + 1_000 * iteration)
+    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration, observation=lambda: obs)
+    buf.ended = pending_resets(envs)  # the copies whose episode ended on the step before the checkpoint
     with run:
         while iteration < iterations:
             # [ppo-loop]

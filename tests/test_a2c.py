@@ -163,3 +163,16 @@ def test_cli_trains_a2c_and_explains_unsupported_spaces(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "error: rlcore's A2C takes flat vector observations, but FrozenLake-v1 has Discrete(16)." in err
     assert not (tmp_path / "fl").exists()
+
+
+def test_a_run_stopped_between_two_iterations_and_resumed_is_the_uninterrupted_run(tmp_path):
+    torch.set_num_threads(1)
+    cfg = Config(**{**PENDULUM, "eval_every": 0})
+    whole = train("Pendulum-v1", cfg, steps=1_680, seed=1, out=tmp_path / "whole")  # 210 steps in each of 8 copies
+    train("Pendulum-v1", cfg, steps=440, seed=1, out=tmp_path / "parts")  # 11 iterations of 8 x 5: mid-episode
+    resumed = train("Pendulum-v1", cfg, steps=1_680, seed=1, out=tmp_path / "parts")
+    for key, value in whole.agent.state_dict().items():
+        assert torch.equal(value, resumed.agent.state_dict()[key]), key
+    done = len(whole.episode_returns) - len(resumed.episode_returns)
+    assert len(resumed.episode_returns) > 0
+    np.testing.assert_array_equal(whole.episode_returns[done:], resumed.episode_returns)

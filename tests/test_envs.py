@@ -165,3 +165,45 @@ def test_an_episode_that_cannot_be_saved_or_does_not_fit_is_said_so():
     bare = gym.make("Hopper-v5")
     bare.reset(seed=0)
     assert not restore_episode(bare, state)  # other wrappers (no episode statistics)
+
+
+def test_a_vector_environment_with_normalized_rewards_goes_on_bit_for_bit_through_a_checkpoint(tmp_path):
+    import copy
+
+    from rlcore.checkpoint import load_checkpoint, save_checkpoint
+    from rlcore.envs import episode_state, pending_resets, restore_episode
+    from rlcore.envs import find_wrapper
+    from rlcore.onpolicy import make_envs, training_statistics
+    from rlcore.ppo import Config
+
+    config = Config(num_envs=3, normalize_obs=False, normalize_reward=True)
+    envs = make_envs("Hopper-v5", config, seed=0)
+    envs.reset(seed=5)
+    envs.action_space.seed(2)
+    actions = [envs.action_space.sample() for _ in range(120)]
+
+    def go(e, acts):
+        out = []
+        for a in acts:
+            obs, reward, terminated, truncated, info = e.step(a)
+            out.append((obs.copy(), reward.copy(), terminated.copy(), truncated.copy()))
+        return out
+
+    go(envs, actions[:40])
+    assert pending_resets(envs).shape == (3,)
+    save_checkpoint(tmp_path / "ckpt.pt", {"episode_env": episode_state(envs)})
+    statistics = copy.deepcopy(training_statistics(envs)[1])  # the run saves these itself (rlcore.harness)
+    uninterrupted = go(envs, actions[40:])
+    fresh = make_envs("Hopper-v5", config, seed=0)
+    fresh.reset(seed=99)
+    find_wrapper(fresh, gym.wrappers.vector.NormalizeReward).return_rms = statistics
+    assert not pending_resets(fresh).any()
+    assert restore_episode(fresh, load_checkpoint(tmp_path / "ckpt.pt")["episode_env"])
+    resumed = go(fresh, actions[40:])
+    assert any(t.any() for _, _, t, _ in uninterrupted)  # episodes ended (and reset) after the checkpoint
+    for a, b in zip(uninterrupted, resumed):
+        for x, y in zip(a, b):
+            np.testing.assert_array_equal(x, y)
+    other = make_envs("Hopper-v5", Config(num_envs=2, normalize_obs=False, normalize_reward=True), seed=0)
+    other.reset(seed=0)
+    assert not restore_episode(other, load_checkpoint(tmp_path / "ckpt.pt")["episode_env"])  # 2 copies, not 3

@@ -158,3 +158,31 @@ def test_an_evaluation_leaves_every_network_in_the_mode_it_found_it():
     run.evaluate_now(1)
     assert seen == [(False, True)]
     assert policy.training and not policy[1].training and not target.training
+
+
+def test_deferred_ctrl_c_stops_at_the_end_of_the_step_and_a_second_one_stops_at_once(tmp_path):
+    import os
+    import signal
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal or a notebook
+    try:
+        for presses, stopped_at in ((1, 4), (2, 3)):
+            run = Run("toy", "Toy-v0", ToyConfig(checkpoint_every=100), 10, 0, tmp_path / f"p{presses}",
+                      desc="toy", defer_interrupts=True)
+            step, where = run.resume(step=0), []
+            with pytest.raises(KeyboardInterrupt):
+                with run:
+                    while step < 10:
+                        where.append("start")
+                        if step == 3:  # Ctrl-C in the middle of the fourth step
+                            for _ in range(presses):
+                                os.kill(os.getpid(), signal.SIGINT)
+                        where.append("end")
+                        step += 1
+                        run.step_done(step, step - 1)
+            assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+            assert load_checkpoint(tmp_path / f"p{presses}" / "checkpoint.pt")["step"] == stopped_at
+            # one press: the fourth step ran to its end; two: it stopped where it was
+            assert where == ["start", "end"] * 4 if presses == 1 else where[-1] == "start"
+    finally:
+        signal.signal(signal.SIGINT, previous)

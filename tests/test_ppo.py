@@ -228,3 +228,22 @@ def test_the_saved_policy_on_raw_observations_acts_as_the_training_wrapper_fed_t
     wanted = np.clip(wanted, -2.0, 2.0)
     got = np.array([policy(o) for o in raw])
     np.testing.assert_allclose(got, wanted, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("env_id", ["Pendulum-v1", "Hopper-v5"])
+def test_a_run_stopped_between_two_iterations_and_resumed_is_the_uninterrupted_run(tmp_path, env_id):
+    """The checkpoint holds each copy's episode in progress (and the reward normalizer's running return): the
+    resumed run goes on with them, so it is the uninterrupted run, bit for bit."""
+    from rlcore.checkpoint import load_checkpoint
+
+    torch.set_num_threads(1)
+    cfg = Config(**{**SMALL, "n_steps": 128}, anneal_lr=False)
+    whole = train(env_id, cfg, steps=1_024, seed=2, out=tmp_path / "whole")
+    train(env_id, cfg, steps=512, seed=2, out=tmp_path / "parts")
+    assert "episode_env" in load_checkpoint(tmp_path / "parts" / "checkpoint.pt")
+    resumed = train(env_id, cfg, steps=1_024, seed=2, out=tmp_path / "parts")
+    for key, value in whole.agent.state_dict().items():
+        assert torch.equal(value, resumed.agent.state_dict()[key]), key
+    done = len(whole.episode_returns) - len(resumed.episode_returns)  # episodes ended before the stop
+    assert len(resumed.episode_returns) > 0
+    np.testing.assert_array_equal(whole.episode_returns[done:], resumed.episode_returns)
