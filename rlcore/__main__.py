@@ -94,6 +94,18 @@ def cmd_experiments(args: argparse.Namespace) -> int:
     if not args.name:
         raise ValueError(f"experiments {args.action} needs an experiment name; see `python -m rlcore experiments list`")
     results = Path(args.results)
+    if args.action == "reevaluate":
+        from rlcore.experiments.reevaluation import store_final_policy_returns
+
+        runs = ex.load_experiment(args.name, results)
+        unknown = set(args.only or ()) - set(runs)
+        if unknown:
+            raise ValueError(f"{args.name} has no configuration {sorted(unknown)}; it has {sorted(runs)}")
+        for run_name, run in runs.items():
+            if run.seeds and (not args.only or run_name in args.only):
+                for path in store_final_policy_returns(run, episodes=args.episodes):
+                    print(f"Wrote {path}")
+        return 0
     if args.action == "run":
         try:
             lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
@@ -142,11 +154,13 @@ def build_parser() -> argparse.ArgumentParser:
     from rlcore.experiments import RESULTS_DIR, WORK_DIR
 
     x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
-    x.add_argument("action", choices=["list", "run", "status"])
+    x.add_argument("action", choices=["list", "run", "status", "reevaluate"],
+                   help="reevaluate: evaluate each finished seed's final policy and store its returns in results/")
     x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
     x.add_argument("--jobs", type=count(1), default=1, help="runs in parallel, one process each (one per core)")
     x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
     x.add_argument("--seeds", type=seed_list, help="comma-separated subset of the seeds, e.g. 0,1")
+    x.add_argument("--episodes", type=count(1), default=5, help="reevaluate: episodes per seed")
     x.add_argument("--results", default=str(RESULTS_DIR), help="where finished runs' small outputs go")
     x.add_argument("--work", default=str(WORK_DIR), help="where runs train and keep full checkpoints")
     x.set_defaults(func=cmd_experiments)

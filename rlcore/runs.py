@@ -173,6 +173,24 @@ def command_line() -> str | None:
     return shlex.join([*head, *sys.argv[1:]])
 
 
+def cpu_model() -> str:
+    """The processor: vendor and model name (from ``/proc/cpuinfo`` where there is one) and PyTorch's CPU
+    capability. The same code and seed give other bits on other processors (MKL takes other kernels on AMD than
+    on Intel), so a result that is reproduced bit for bit names it."""
+    import torch
+
+    info: dict[str, str] = {}
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            info.setdefault(key.strip(), value.strip())
+    except OSError:
+        pass
+    vendor = info.get("vendor_id", platform.machine())
+    model = info.get("model name", platform.processor() or "unknown model")
+    return f"{vendor} {model} ({torch.backends.cpu.get_cpu_capability()})"
+
+
 def run_metadata(**extra: Any) -> dict[str, Any]:
     """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``.
 
@@ -185,8 +203,8 @@ def run_metadata(**extra: Any) -> dict[str, Any]:
         "command": command_line(),
         "versions": versions(),
         "commit": LOADED_COMMIT,
-        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count(),
-                    "torch_threads": torch.get_num_threads()},
+        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpu": cpu_model(),
+                    "cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()},
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **extra,
     }

@@ -69,18 +69,9 @@ def fingerprint(name: str, tmp: Path) -> dict:
 
 def platform() -> str:
     """The CPU the pins hold for: vendor, model name and PyTorch's CPU capability."""
-    info = {}
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            key, _, value = line.partition(":")
-            info.setdefault(key.strip(), value.strip())
-    except OSError:
-        pass
-    import platform as host
+    from rlcore.runs import cpu_model
 
-    vendor = info.get("vendor_id", host.machine())
-    model = info.get("model name", host.processor() or "unknown model")
-    return f"{vendor} {model} ({torch.backends.cpu.get_cpu_capability()})"
+    return cpu_model()
 
 
 def recorded() -> dict[str, dict]:

@@ -73,3 +73,45 @@ def test_three_ways_on_halfcheetah_which_charges_the_unclipped_action():
     assert out["unclipped"] < out["clipped"] - 1_000            # 0.1 sum a^2 on huge actions, 1,000 steps
     small = action_clipping_returns(_policy("HalfCheetah-v5", 1e-3), "HalfCheetah-v5", episodes=1)
     assert small["outside"] == 0 and small["clipped"] == pytest.approx(small["unclipped"], rel=1e-6)
+
+
+def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the_policy_changes(tiny_ppo, tmp_path,
+                                                                                                   capsys):
+    import json
+    import shutil
+
+    from rlcore.__main__ import main
+    from rlcore.experiments import reevaluation
+
+    shutil.copytree(tiny_ppo.seeds[0].folder.parents[2], tmp_path / "results")  # a copy: the other tests' stays
+    assert main(["experiments", "reevaluate", "tiny-ppo", "--episodes", "2", "--results",
+                 str(tmp_path / "results")]) == 0
+    run = ex.load_experiment("tiny-ppo", tmp_path / "results")["ppo"]
+    assert capsys.readouterr().out.count(reevaluation.STORED) == 2
+    path = run.seeds[0].folder / reevaluation.STORED
+    record = json.loads(path.read_text())
+    assert len(record["returns"]) == 2 and record["first_reset_seed"] == 10_000
+    assert {"command", "commit", "versions", "cpu"} <= set(record)
+    reevaluation._FINALS.clear()
+    live = np.array([p.mean() for p in (reevaluation._evaluate(s, _pendulum(), 2) for s in run.seeds)])
+    np.testing.assert_array_equal(final_policy_returns(run, episodes=2), live)  # stored on this processor
+
+    record["returns"] = [1.0, 3.0]  # what another processor might have stored
+    path.write_text(json.dumps(record))
+    reevaluation._FINALS.clear()
+    assert final_policy_returns(run, episodes=2)[0] == 2.0                   # read, not evaluated
+    assert final_policy_returns(run, episodes=1)[0] != 1.0                   # another number of episodes: evaluated
+    ckpt = load_checkpoint(run.seeds[0].folder / "policy.pt")
+    save_checkpoint(run.seeds[0].folder / "policy.pt", {**ckpt, "obs_clip": 9.0})  # a policy trained again
+    reevaluation._FINALS.clear()
+    assert final_policy_returns(run, episodes=2)[0] != 2.0                   # stale: evaluated again
+
+    assert main(["experiments", "reevaluate", "tiny-ppo", "--only", "nope", "--results",
+                 str(tmp_path / "results")]) == 2
+    assert "has no configuration ['nope']" in capsys.readouterr().err
+
+
+def _pendulum():
+    from rlcore.envs import make_env
+
+    return make_env("Pendulum-v1")

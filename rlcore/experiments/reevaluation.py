@@ -2,38 +2,104 @@
 training evaluated them on, which seeds were trained before PPO's evaluation-clipping fix, and one PPO policy's
 return three ways (mean action clipped to the motors' range, unclipped, sampled).
 
-    finals = final_policy_returns(run)            # per seed, evaluated now
+    finals = final_policy_returns(run)            # per seed: stored in results/, or evaluated now
     before = trained_before_clipping_fix(run)     # per seed, True where eval.csv counted unclipped actions
+
+A policy's return is a chaotic function of the last bits of its actions, and those differ between processors
+(MKL takes other kernels on AMD than on Intel): a Hopper evaluated on one machine can fall where on another it
+hops. So the final policies' returns that the book quotes are evaluated once, by
+
+    python -m rlcore experiments reevaluate NAME            # writes seed-<s>/final-policy-returns.json
+
+and stored beside each policy with the command, the commit and the processor; :func:`final_policy_returns`
+reads them (a stored record whose ``policy.pt`` has changed since is ignored), and evaluates now only where none
+is stored.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from rlcore.experiments.results import RunResults
+from rlcore.experiments.results import RunResults, SeedResult
 
 _FINALS: dict[tuple, np.ndarray] = {}
+STORED = "final-policy-returns.json"
+"""A seed's stored re-evaluation, in its ``results/`` folder (:func:`store_final_policy_returns`)."""
+
+
+def _policy_sha256(folder: Path) -> str:
+    return hashlib.sha256((folder / "policy.pt").read_bytes()).hexdigest()
+
+
+def _evaluate(s: SeedResult, env: Any, episodes: int) -> np.ndarray:
+    from rlcore.evaluate import evaluate_policy
+
+    return np.asarray(evaluate_policy(s.policy, env, episodes=episodes, seed=s.seed + 10_000), dtype=float)
+
+
+def stored_final_returns(s: SeedResult, episodes: int) -> np.ndarray | None:
+    """The per-episode returns stored for ``s``'s final policy over ``episodes`` episodes, or None (none stored,
+    another number of episodes, or a ``policy.pt`` that changed since)."""
+    path = s.folder / STORED
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    if record.get("episodes") != episodes or record.get("policy_sha256") != _policy_sha256(s.folder):
+        return None
+    return np.asarray(record["returns"], dtype=float)
 
 
 def final_policy_returns(run: RunResults, episodes: int = 5) -> np.ndarray:
-    """Every seed's final deterministic policy (``policy.pt``) evaluated now, in the order of ``run.seeds``: the mean
-    return of ``episodes`` episodes from the start states of the evaluations logged during training (episode ``i``
-    from ``reset(seed=seed + 10_000 + i)``). On the processor that trained it, a policy evaluated after the fix
-    reproduces its last logged evaluation. Computed once per run and number of episodes."""
+    """Every seed's final deterministic policy (``policy.pt``), in the order of ``run.seeds``: the mean return of
+    ``episodes`` episodes from the start states of the evaluations logged during training (episode ``i`` from
+    ``reset(seed=seed + 10_000 + i)``), as stored by :func:`store_final_policy_returns`, or, where none is
+    stored, evaluated now. On the processor that trained it, a policy evaluated after the fix reproduces its
+    last logged evaluation. Computed once per run and number of episodes."""
     from rlcore.envs import make_env
-    from rlcore.evaluate import evaluate_policy
 
     key = (tuple(str(s.folder) for s in run.seeds), episodes)
     if key not in _FINALS:
-        env = make_env(run.spec.env_id, **run.spec.overrides.get("env_kwargs", {}))
+        stored = [stored_final_returns(s, episodes) for s in run.seeds]
+        env = None if all(r is not None for r in stored) else make_env(run.spec.env_id,
+                                                                          **run.spec.overrides.get("env_kwargs", {}))
         try:
-            _FINALS[key] = np.array([evaluate_policy(s.policy, env, episodes=episodes, seed=s.seed + 10_000).mean()
-                                     for s in run.seeds])
+            _FINALS[key] = np.array([(r if r is not None else _evaluate(s, env, episodes)).mean()
+                                     for s, r in zip(run.seeds, stored)])
         finally:
-            env.close()
+            if env is not None:
+                env.close()
     return _FINALS[key]
+
+
+def store_final_policy_returns(run: RunResults, episodes: int = 5) -> list[Path]:
+    """Evaluate every seed's final policy as :func:`final_policy_returns` does and write the returns, with the
+    command, commit and processor, to ``seed-<s>/final-policy-returns.json``; the paths written."""
+    from rlcore.envs import make_env
+    from rlcore.runs import cpu_model, run_metadata
+
+    if run.source != "results":
+        raise ValueError(f"{run.spec.name}: only finished runs in results/ have stored re-evaluations")
+    env = make_env(run.spec.env_id, **run.spec.overrides.get("env_kwargs", {}))
+    written = []
+    try:
+        for s in run.seeds:
+            returns = _evaluate(s, env, episodes)
+            record = {"episodes": episodes, "first_reset_seed": s.seed + 10_000, "returns": returns.tolist(),
+                      "mean": float(returns.mean()), "policy_sha256": _policy_sha256(s.folder),
+                      "what": "per-episode return of the final deterministic policy (policy.pt), episode i from "
+                              "reset(seed=first_reset_seed + i)",
+                      **run_metadata(cpu=cpu_model())}
+            (s.folder / STORED).write_text(json.dumps(record, indent=1) + "\n")
+            written.append(s.folder / STORED)
+    finally:
+        env.close()
+    _FINALS.clear()
+    return written
 
 
 def trained_before_clipping_fix(run: RunResults) -> np.ndarray:
