@@ -90,10 +90,10 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
     assert capsys.readouterr().out.count(reevaluation.STORED) == 2
     path = run.seeds[0].folder / reevaluation.STORED
     record = json.loads(path.read_text())
-    assert len(record["returns"]) == 2 and record["first_reset_seed"] == 10_000
+    assert len(record["returns"]) == 2 and record["lengths"] == [200, 200] and record["first_reset_seed"] == 10_000
     assert {"command", "commit", "versions", "cpu"} <= set(record)
     reevaluation._FINALS.clear()
-    live = np.array([p.mean() for p in (reevaluation._evaluate(s, _pendulum(), 2) for s in run.seeds)])
+    live = np.array([r.mean() for r, _ in (reevaluation._evaluate(s, _pendulum(), 2) for s in run.seeds)])
     np.testing.assert_array_equal(final_policy_returns(run, episodes=2), live)  # stored on this processor
 
     record["returns"] = [1.0, 3.0]  # what another processor might have stored

@@ -3,6 +3,7 @@ training evaluated them on, which seeds were trained before PPO's evaluation-cli
 return three ways (mean action clipped to the motors' range, unclipped, sampled).
 
     finals = final_policy_returns(run)            # per seed: stored in results/, or evaluated now
+    episodes = final_policy_episodes(run)         # per seed: (returns, lengths) of each episode
     before = trained_before_clipping_fix(run)     # per seed, True where eval.csv counted unclipped actions
 
 A policy's return is a chaotic function of the last bits of its actions, and those differ between processors
@@ -27,7 +28,7 @@ import numpy as np
 
 from rlcore.experiments.results import RunResults, SeedResult
 
-_FINALS: dict[tuple, np.ndarray] = {}
+_FINALS: dict[tuple, Any] = {}
 STORED = "final-policy-returns.json"
 """A seed's stored re-evaluation, in its ``results/`` folder (:func:`store_final_policy_returns`)."""
 
@@ -36,49 +37,59 @@ def _policy_sha256(folder: Path) -> str:
     return hashlib.sha256((folder / "policy.pt").read_bytes()).hexdigest()
 
 
-def _evaluate(s: SeedResult, env: Any, episodes: int) -> np.ndarray:
-    from rlcore.evaluate import evaluate_policy
+def _evaluate(s: SeedResult, env: Any, episodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-episode returns and lengths of ``s``'s final policy, episode ``i`` from ``reset(seed=seed + 10_000 + i)``."""
+    from rlcore.evaluate import episode_rewards
 
-    return np.asarray(evaluate_policy(s.policy, env, episodes=episodes, seed=s.seed + 10_000), dtype=float)
+    rewards = episode_rewards(s.policy, env, episodes=episodes, seed=s.seed + 10_000)
+    return np.array([r.sum() for r in rewards], dtype=float), np.array([len(r) for r in rewards])
 
 
-def stored_final_returns(s: SeedResult, episodes: int) -> np.ndarray | None:
-    """The per-episode returns stored for ``s``'s final policy over ``episodes`` episodes, or None (none stored,
-    another number of episodes, or a ``policy.pt`` that changed since)."""
+def stored_final_episodes(s: SeedResult, episodes: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """The per-episode returns and lengths stored for ``s``'s final policy over ``episodes`` episodes, or None (none
+    stored, another number of episodes, or a ``policy.pt`` that changed since)."""
     path = s.folder / STORED
     if not path.exists():
         return None
     record = json.loads(path.read_text())
     if record.get("episodes") != episodes or record.get("policy_sha256") != _policy_sha256(s.folder):
         return None
-    return np.asarray(record["returns"], dtype=float)
+    return np.asarray(record["returns"], dtype=float), np.asarray(record["lengths"])
 
 
-def final_policy_returns(run: RunResults, episodes: int = 5) -> np.ndarray:
-    """Every seed's final deterministic policy (``policy.pt``), in the order of ``run.seeds``: the mean return of
-    ``episodes`` episodes from the start states of the evaluations logged during training (episode ``i`` from
-    ``reset(seed=seed + 10_000 + i)``), as stored by :func:`store_final_policy_returns`, or, where none is
-    stored, evaluated now. On the processor that trained it, a policy evaluated after the fix reproduces its
-    last logged evaluation. Computed once per run and number of episodes."""
+def final_policy_episodes(run: RunResults, episodes: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per seed of ``run`` (in order), the per-episode returns and lengths of its final deterministic policy
+    (``policy.pt``) over ``episodes`` episodes from the start states of the evaluations logged during training
+    (episode ``i`` from ``reset(seed=seed + 10_000 + i)``): as stored by :func:`store_final_policy_returns`, or,
+    where none is stored, evaluated now. Computed once per run and number of episodes."""
     from rlcore.envs import make_env
 
     key = (tuple(str(s.folder) for s in run.seeds), episodes)
     if key not in _FINALS:
-        stored = [stored_final_returns(s, episodes) for s in run.seeds]
+        stored = [stored_final_episodes(s, episodes) for s in run.seeds]
         env = None if all(r is not None for r in stored) else make_env(run.spec.env_id,
                                                                           **run.spec.overrides.get("env_kwargs", {}))
         try:
-            _FINALS[key] = np.array([(r if r is not None else _evaluate(s, env, episodes)).mean()
-                                     for s, r in zip(run.seeds, stored)])
+            _FINALS[key] = [r if r is not None else _evaluate(s, env, episodes) for s, r in zip(run.seeds, stored)]
         finally:
             if env is not None:
                 env.close()
     return _FINALS[key]
 
 
+def final_policy_returns(run: RunResults, episodes: int = 5) -> np.ndarray:
+    """Every seed's final deterministic policy: the mean return of its :func:`final_policy_episodes`. On the
+    processor that trained it, a policy evaluated after the fix reproduces its last logged evaluation."""
+    key = ("mean", tuple(str(s.folder) for s in run.seeds), episodes)
+    if key not in _FINALS:
+        _FINALS[key] = np.array([returns.mean() for returns, _ in final_policy_episodes(run, episodes)])
+    return _FINALS[key]
+
+
 def store_final_policy_returns(run: RunResults, episodes: int = 5) -> list[Path]:
-    """Evaluate every seed's final policy as :func:`final_policy_returns` does and write the returns, with the
-    command, commit and processor, to ``seed-<s>/final-policy-returns.json``; the paths written."""
+    """Evaluate every seed's final policy as :func:`final_policy_episodes` does and write its per-episode returns
+    and lengths, with the command, commit and processor, to ``seed-<s>/final-policy-returns.json``; the paths
+    written."""
     from rlcore.envs import make_env
     from rlcore.runs import cpu_model, run_metadata
 
@@ -88,11 +99,12 @@ def store_final_policy_returns(run: RunResults, episodes: int = 5) -> list[Path]
     written = []
     try:
         for s in run.seeds:
-            returns = _evaluate(s, env, episodes)
+            returns, lengths = _evaluate(s, env, episodes)
             record = {"episodes": episodes, "first_reset_seed": s.seed + 10_000, "returns": returns.tolist(),
-                      "mean": float(returns.mean()), "policy_sha256": _policy_sha256(s.folder),
-                      "what": "per-episode return of the final deterministic policy (policy.pt), episode i from "
-                              "reset(seed=first_reset_seed + i)",
+                      "lengths": lengths.tolist(), "mean": float(returns.mean()),
+                      "policy_sha256": _policy_sha256(s.folder),
+                      "what": "per-episode return and length of the final deterministic policy (policy.pt), "
+                              "episode i from reset(seed=first_reset_seed + i)",
                       **run_metadata(cpu=cpu_model())}
             (s.folder / STORED).write_text(json.dumps(record, indent=1) + "\n")
             written.append(s.folder / STORED)
