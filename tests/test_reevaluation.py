@@ -9,6 +9,7 @@ from rlcore import experiments as ex
 from rlcore.checkpoint import load_checkpoint, save_checkpoint
 from rlcore.experiments.reevaluation import (action_clipping_returns, final_policy_returns,
                                              trained_before_clipping_fix)
+from rlcore.evaluate import evaluate_policy
 from rlcore.ppo import Config, train
 
 
@@ -87,16 +88,17 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
     assert main(["experiments", "reevaluate", "tiny-ppo", "--episodes", "2", "--results",
                  str(tmp_path / "results")]) == 0
     run = ex.load_experiment("tiny-ppo", tmp_path / "results")["ppo"]
-    assert capsys.readouterr().out.count(reevaluation.STORED) == 2
-    path = run.seeds[0].folder / reevaluation.STORED
+    assert capsys.readouterr().out.count((reevaluation.FINAL + '.json')) == 2
+    path = run.seeds[0].folder / (reevaluation.FINAL + '.json')
     record = json.loads(path.read_text())
-    assert len(record["returns"]) == 2 and record["lengths"] == [200, 200] and record["first_reset_seed"] == 10_000
+    value = record["value"]
+    assert len(value["returns"]) == 2 and value["lengths"] == [200, 200] and record["params"]["first_reset_seed"] == 10_000
     assert {"command", "commit", "versions", "cpu"} <= set(record)
     reevaluation._FINALS.clear()
-    live = np.array([r.mean() for r, _ in (reevaluation._evaluate(s, _pendulum(), 2) for s in run.seeds)])
+    live = np.array([evaluate_policy(s.policy, _pendulum(), 2, seed=s.seed + 10_000).mean() for s in run.seeds])
     np.testing.assert_array_equal(final_policy_returns(run, episodes=2), live)  # stored on this processor
 
-    record["returns"] = [1.0, 3.0]  # what another processor might have stored
+    record["value"]["returns"] = [1.0, 3.0]  # what another processor might have stored
     path.write_text(json.dumps(record))
     reevaluation._FINALS.clear()
     assert final_policy_returns(run, episodes=2)[0] == 2.0                   # read, not evaluated
@@ -109,6 +111,28 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
     assert main(["experiments", "reevaluate", "tiny-ppo", "--only", "nope", "--results",
                  str(tmp_path / "results")]) == 2
     assert "has no configuration ['nope']" in capsys.readouterr().err
+
+
+def test_stored_computes_once_writes_only_when_asked_and_reads_back_the_same_params(tiny_ppo, tmp_path, monkeypatch):
+    import shutil
+
+    from rlcore.experiments import reevaluation
+
+    shutil.copytree(tiny_ppo.seeds[0].folder.parents[2], tmp_path / "results")
+    seed = ex.load_experiment("tiny-ppo", tmp_path / "results")["ppo"].seeds[0]
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"x": float(len(calls))}
+
+    monkeypatch.delenv(reevaluation.STORE, raising=False)
+    assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 1.0}
+    assert not (seed.folder / "probe.json").exists()                    # not asked to store
+    monkeypatch.setenv(reevaluation.STORE, "1")
+    assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 2.0}
+    assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 2.0} and len(calls) == 2  # read back
+    assert reevaluation.stored(seed, "probe", {"k": 2}, compute) == {"x": 3.0}  # other params: computed again
 
 
 def _pendulum():

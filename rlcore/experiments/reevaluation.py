@@ -14,13 +14,16 @@ hops. So the final policies' returns that the book quotes are evaluated once, by
 
 and stored beside each policy with the command, the commit and the processor; :func:`final_policy_returns`
 reads them (a stored record whose ``policy.pt`` has changed since is ignored), and evaluates now only where none
-is stored.
+is stored. Other re-evaluations a page quotes go through :func:`stored` the same way; a build with
+``RLCORE_STORE_REEVALUATIONS=1`` writes those it computes.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -29,51 +32,66 @@ import numpy as np
 from rlcore.experiments.results import RunResults, SeedResult
 
 _FINALS: dict[tuple, Any] = {}
-STORED = "final-policy-returns.json"
-"""A seed's stored re-evaluation, in its ``results/`` folder (:func:`store_final_policy_returns`)."""
+FINAL = "final-policy-returns"
+"""The name of the stored final-policy re-evaluation (``seed-<s>/final-policy-returns.json``)."""
+STORE = "RLCORE_STORE_REEVALUATIONS"
+"""Set to 1, :func:`stored` writes what it computes (``RLCORE_STORE_REEVALUATIONS=1 jupyter-book build .``)."""
 
 
 def _policy_sha256(folder: Path) -> str:
     return hashlib.sha256((folder / "policy.pt").read_bytes()).hexdigest()
 
 
-def _evaluate(s: SeedResult, env: Any, episodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-episode returns and lengths of ``s``'s final policy, episode ``i`` from ``reset(seed=seed + 10_000 + i)``."""
-    from rlcore.evaluate import episode_rewards
+def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[], dict[str, Any]],
+           write: bool | None = None) -> dict[str, Any]:
+    """A re-evaluation of seed ``s``'s final policy that a page quotes: read from ``seed-<s>/<name>.json`` where it
+    was stored with the same ``params`` for the same ``policy.pt``; otherwise ``compute()`` now, and, with ``write``
+    (default: the environment variable ``RLCORE_STORE_REEVALUATIONS=1``), store it there with the command, the commit
+    and the processor. ``compute`` returns a dict of numbers and lists of numbers."""
+    from rlcore.runs import cpu_model, run_metadata
 
-    rewards = episode_rewards(s.policy, env, episodes=episodes, seed=s.seed + 10_000)
-    return np.array([r.sum() for r in rewards], dtype=float), np.array([len(r) for r in rewards])
+    path = s.folder / f"{name}.json"
+    sha = _policy_sha256(s.folder)
+    if path.exists():
+        record = json.loads(path.read_text())
+        if record.get("params") == params and record.get("policy_sha256") == sha:
+            return record["value"]
+    value = compute()
+    if write or (write is None and os.environ.get(STORE) == "1"):
+        record = {"name": name, "params": params, "value": value, "policy_sha256": sha, **run_metadata(cpu=cpu_model())}
+        path.write_text(json.dumps(record, indent=1) + "\n")
+    return value
 
 
-def stored_final_episodes(s: SeedResult, episodes: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """The per-episode returns and lengths stored for ``s``'s final policy over ``episodes`` episodes, or None (none
-    stored, another number of episodes, or a ``policy.pt`` that changed since)."""
-    path = s.folder / STORED
-    if not path.exists():
-        return None
-    record = json.loads(path.read_text())
-    if record.get("episodes") != episodes or record.get("policy_sha256") != _policy_sha256(s.folder):
-        return None
-    return np.asarray(record["returns"], dtype=float), np.asarray(record["lengths"])
+def _final_episodes(s: SeedResult, env_id: str, env_kwargs: dict[str, Any], episodes: int,
+                    write: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def compute() -> dict[str, Any]:
+        from rlcore.envs import make_env
+        from rlcore.evaluate import episode_rewards
+
+        env = make_env(env_id, **env_kwargs)
+        try:
+            rewards = episode_rewards(s.policy, env, episodes=episodes, seed=s.seed + 10_000)
+        finally:
+            env.close()
+        return {"returns": [float(r.sum()) for r in rewards], "lengths": [len(r) for r in rewards]}
+
+    params = {"episodes": episodes, "first_reset_seed": s.seed + 10_000,
+              "what": "per-episode return and length of the final deterministic policy (policy.pt), episode i "
+                      "from reset(seed=first_reset_seed + i)"}
+    value = stored(s, FINAL, params, compute, write)
+    return np.asarray(value["returns"], dtype=float), np.asarray(value["lengths"])
 
 
 def final_policy_episodes(run: RunResults, episodes: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per seed of ``run`` (in order), the per-episode returns and lengths of its final deterministic policy
     (``policy.pt``) over ``episodes`` episodes from the start states of the evaluations logged during training
-    (episode ``i`` from ``reset(seed=seed + 10_000 + i)``): as stored by :func:`store_final_policy_returns`, or,
-    where none is stored, evaluated now. Computed once per run and number of episodes."""
-    from rlcore.envs import make_env
-
+    (episode ``i`` from ``reset(seed=seed + 10_000 + i)``): as stored (:func:`stored`), or, where none is stored,
+    evaluated now. Computed once per run and number of episodes."""
     key = (tuple(str(s.folder) for s in run.seeds), episodes)
     if key not in _FINALS:
-        stored = [stored_final_episodes(s, episodes) for s in run.seeds]
-        env = None if all(r is not None for r in stored) else make_env(run.spec.env_id,
-                                                                          **run.spec.overrides.get("env_kwargs", {}))
-        try:
-            _FINALS[key] = [r if r is not None else _evaluate(s, env, episodes) for s, r in zip(run.seeds, stored)]
-        finally:
-            if env is not None:
-                env.close()
+        kwargs = run.spec.overrides.get("env_kwargs", {})
+        _FINALS[key] = [_final_episodes(s, run.spec.env_id, kwargs, episodes) for s in run.seeds]
     return _FINALS[key]
 
 
@@ -87,31 +105,16 @@ def final_policy_returns(run: RunResults, episodes: int = 5) -> np.ndarray:
 
 
 def store_final_policy_returns(run: RunResults, episodes: int = 5) -> list[Path]:
-    """Evaluate every seed's final policy as :func:`final_policy_episodes` does and write its per-episode returns
-    and lengths, with the command, commit and processor, to ``seed-<s>/final-policy-returns.json``; the paths
-    written."""
-    from rlcore.envs import make_env
-    from rlcore.runs import cpu_model, run_metadata
-
+    """Evaluate every seed's final policy now as :func:`final_policy_episodes` does and store it
+    (``seed-<s>/final-policy-returns.json``); the paths written."""
     if run.source != "results":
         raise ValueError(f"{run.spec.name}: only finished runs in results/ have stored re-evaluations")
-    env = make_env(run.spec.env_id, **run.spec.overrides.get("env_kwargs", {}))
-    written = []
-    try:
-        for s in run.seeds:
-            returns, lengths = _evaluate(s, env, episodes)
-            record = {"episodes": episodes, "first_reset_seed": s.seed + 10_000, "returns": returns.tolist(),
-                      "lengths": lengths.tolist(), "mean": float(returns.mean()),
-                      "policy_sha256": _policy_sha256(s.folder),
-                      "what": "per-episode return and length of the final deterministic policy (policy.pt), "
-                              "episode i from reset(seed=first_reset_seed + i)",
-                      **run_metadata(cpu=cpu_model())}
-            (s.folder / STORED).write_text(json.dumps(record, indent=1) + "\n")
-            written.append(s.folder / STORED)
-    finally:
-        env.close()
+    for s in run.seeds:
+        path = s.folder / f"{FINAL}.json"
+        path.unlink(missing_ok=True)
+        _final_episodes(s, run.spec.env_id, run.spec.overrides.get("env_kwargs", {}), episodes, write=True)
     _FINALS.clear()
-    return written
+    return [s.folder / f"{FINAL}.json" for s in run.seeds]
 
 
 def trained_before_clipping_fix(run: RunResults) -> np.ndarray:
