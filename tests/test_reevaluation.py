@@ -91,6 +91,7 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
     assert capsys.readouterr().out.count((reevaluation.FINAL + '.json')) == 2
     path = run.seeds[0].folder / (reevaluation.FINAL + '.json')
     record = json.loads(path.read_text())
+    (record,) = record["records"]
     value = record["value"]
     assert len(value["returns"]) == 2 and value["lengths"] == [200, 200] and record["params"]["first_reset_seed"] == 10_000
     assert {"command", "commit", "versions", "cpu"} <= set(record)
@@ -99,7 +100,7 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
     np.testing.assert_array_equal(final_policy_returns(run, episodes=2), live)  # stored on this processor
 
     record["value"]["returns"] = [1.0, 3.0]  # what another processor might have stored
-    path.write_text(json.dumps(record))
+    path.write_text(json.dumps({"records": [record]}))
     reevaluation._FINALS.clear()
     assert final_policy_returns(run, episodes=2)[0] == 2.0                   # read, not evaluated
     assert final_policy_returns(run, episodes=1)[0] != 1.0                   # another number of episodes: evaluated
@@ -133,6 +134,7 @@ def test_stored_computes_once_writes_only_when_asked_and_reads_back_the_same_par
     assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 2.0}
     assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 2.0} and len(calls) == 2  # read back
     assert reevaluation.stored(seed, "probe", {"k": 2}, compute) == {"x": 3.0}  # other params: computed again
+    assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 2.0} and len(calls) == 3  # both kept
 
 
 def _pendulum():

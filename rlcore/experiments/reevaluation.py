@@ -47,20 +47,47 @@ def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[
     """A re-evaluation of seed ``s``'s final policy that a page quotes: read from ``seed-<s>/<name>.json`` where it
     was stored with the same ``params`` for the same ``policy.pt``; otherwise ``compute()`` now, and, with ``write``
     (default: the environment variable ``RLCORE_STORE_REEVALUATIONS=1``), store it there with the command, the commit
-    and the processor. ``compute`` returns a dict of numbers and lists of numbers."""
+    and the processor (one record per ``params``). ``compute`` returns a dict of numbers and lists of numbers."""
     from rlcore.runs import cpu_model, run_metadata
 
     path = s.folder / f"{name}.json"
     sha = _policy_sha256(s.folder)
-    if path.exists():
-        record = json.loads(path.read_text())
-        if record.get("params") == params and record.get("policy_sha256") == sha:
+    records = json.loads(path.read_text())["records"] if path.exists() else []
+    for record in records:
+        if record["params"] == params and record["policy_sha256"] == sha:
             return record["value"]
     value = compute()
     if write or (write is None and os.environ.get(STORE) == "1"):
-        record = {"name": name, "params": params, "value": value, "policy_sha256": sha, **run_metadata(cpu=cpu_model())}
-        path.write_text(json.dumps(record, indent=1) + "\n")
+        records = [r for r in records if r["params"] != params]
+        records.append({"params": params, "value": value, "policy_sha256": sha, **run_metadata(cpu=cpu_model())})
+        path.write_text(json.dumps({"name": name, "records": records}, indent=1) + "\n")
     return value
+
+
+def stored_returns(s: SeedResult, env_id: str, episodes: int, first_reset_seed: int) -> np.ndarray:
+    """Per-episode returns of ``s``'s final policy, episode ``i`` from ``reset(seed=first_reset_seed + i)``:
+    :func:`stored` as ``returns``, else evaluated now."""
+    def compute() -> dict[str, Any]:
+        from rlcore.envs import make_env
+        from rlcore.evaluate import evaluate_policy
+
+        env = make_env(env_id)
+        try:
+            return {"returns": evaluate_policy(s.policy, env, episodes=episodes, seed=first_reset_seed).tolist()}
+        finally:
+            env.close()
+
+    params = {"env_id": env_id, "episodes": episodes, "first_reset_seed": first_reset_seed}
+    return np.asarray(stored(s, "returns", params, compute)["returns"], dtype=float)
+
+
+def stored_reward_anatomy(s: SeedResult, env_id: str, episodes: int, first_reset_seed: int) -> dict[str, float]:
+    """:func:`rlcore.mujoco_analysis.reward_anatomy` of ``s``'s final policy: :func:`stored` as ``reward-anatomy``,
+    else computed now."""
+    from rlcore.mujoco_analysis import reward_anatomy
+
+    params = {"env_id": env_id, "episodes": episodes, "first_reset_seed": first_reset_seed}
+    return stored(s, "reward-anatomy", params, lambda: reward_anatomy(s.policy, env_id, episodes, seed=first_reset_seed))
 
 
 def _final_episodes(s: SeedResult, env_id: str, env_kwargs: dict[str, Any], episodes: int,
