@@ -115,6 +115,7 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
 
 
 def test_stored_computes_once_writes_only_when_asked_and_reads_back_the_same_params(tiny_ppo, tmp_path, monkeypatch):
+    import json
     import shutil
 
     from rlcore.experiments import reevaluation
@@ -132,6 +133,7 @@ def test_stored_computes_once_writes_only_when_asked_and_reads_back_the_same_par
     assert not (seed.folder / "probe.json").exists()                    # not asked to store
     monkeypatch.setenv(reevaluation.STORE, "1")
     assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 2.0}
+    assert "jupyter-book build" in json.loads((seed.folder / "probe.json").read_text())["records"][0]["command"]
     assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 2.0} and len(calls) == 2  # read back
     assert reevaluation.stored(seed, "probe", {"k": 2}, compute) == {"x": 3.0}  # other params: computed again
     assert reevaluation.stored(seed, "probe", {"k": 1}, compute) == {"x": 2.0} and len(calls) == 3  # both kept

@@ -57,9 +57,13 @@ def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[
         if record["params"] == params and record["policy_sha256"] == sha:
             return record["value"]
     value = compute()
-    if write or (write is None and os.environ.get(STORE) == "1"):
+    from_a_page = write is None and os.environ.get(STORE) == "1"
+    if write or from_a_page:
+        meta = run_metadata(cpu=cpu_model())
+        if from_a_page:  # inside a page's kernel the process's own command line says nothing
+            meta["command"] = f"{STORE}=1 jupyter-book build .  # computed by the page that quotes it"
         records = [r for r in records if r["params"] != params]
-        records.append({"params": params, "value": value, "policy_sha256": sha, **run_metadata(cpu=cpu_model())})
+        records.append({"params": params, "value": value, "policy_sha256": sha, **meta})
         path.write_text(json.dumps({"name": name, "records": records}, indent=1) + "\n")
     return value
 
