@@ -97,12 +97,9 @@ def cmd_experiments(args: argparse.Namespace) -> int:
     if args.action == "reevaluate":
         from rlcore.experiments.reevaluation import store_final_policy_returns
 
-        runs = ex.load_experiment(args.name, results)
-        unknown = set(args.only or ()) - set(runs)
-        if unknown:
-            raise ValueError(f"{args.name} has no configuration {sorted(unknown)}; it has {sorted(runs)}")
-        for run_name, run in runs.items():
-            if run.seeds and (not args.only or run_name in args.only):
+        chosen = {spec.name for spec in ex.chosen_runs(args.name, args.only)}
+        for run_name, run in ex.load_experiment(args.name, results).items():
+            if run.seeds and run_name in chosen:
                 for path in store_final_policy_returns(run, episodes=args.episodes):
                     print(f"Wrote {path}")
         return 0

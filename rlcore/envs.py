@@ -193,8 +193,6 @@ EPISODE_COUNTERS = ("_elapsed_steps", "episode_returns", "episode_lengths")
 """What a wrapper counts within an episode (TimeLimit; RecordEpisodeStatistics's return and length so far)."""
 CLASSIC_STATE = ("state", "steps_beyond_terminated", "last_u")
 """What a classic-control task keeps between steps (CartPole, Pendulum, MountainCar, Acrobot)."""
-
-
 VECTOR_COUNTERS = ("accumulated_reward", "_prev_dones", "episode_returns", "episode_lengths", "prev_dones")
 """What a vector wrapper keeps between steps (NormalizeReward's discounted return so far; RecordEpisodeStatistics's)."""
 
@@ -256,22 +254,42 @@ def episode_state(env: gym.Env) -> dict[str, Any] | None:
             "np_random": base.np_random.bit_generator.state, **simulator}
 
 
-def restore_episode(env: gym.Env, state: dict[str, Any]) -> bool:
-    """Put ``env``, just reset, into the episode in progress that :func:`episode_state` saved; False (and ``env``
-    left as reset) where the state does not fit this environment: other wrappers, or another MuJoCo model."""
+def _saved_mujoco_data(state: dict[str, Any]) -> Any:
+    import mujoco
+
+    saved = mujoco.MjData.__new__(mujoco.MjData)
+    saved.__setstate__(np.asarray(state["mujoco_data"], dtype=np.uint8).tobytes())
+    return saved
+
+
+def _fits(env: Any, state: dict[str, Any]) -> bool:
+    """Whether :func:`episode_state`'s ``state`` can be put back into ``env``: the same wrappers, the same number of
+    copies (vector), the same MuJoCo model sizes."""
     chain = _chain(env)
     base = chain[-1]
     if [type(w).__name__ for w in chain[:-1]] != list(state["wrappers"]):
         return False
     if "copies" in state:
-        if not isinstance(base, gym.vector.SyncVectorEnv) or len(base.envs) != len(state["copies"]):
+        return (isinstance(base, gym.vector.SyncVectorEnv) and len(base.envs) == len(state["copies"])
+                and all(_fits(copy, saved) for copy, saved in zip(base.envs, state["copies"])))
+    if "mujoco_data" in state:
+        if not hasattr(base, "data"):
             return False
-        before = [episode_state(e) for e in base.envs]
-        for i, (copy, saved) in enumerate(zip(base.envs, state["copies"])):
-            if not restore_episode(copy, saved):
-                for earlier, undo in zip(base.envs[:i], before):  # leave env as reset
-                    restore_episode(earlier, undo)
-                return False
+        model = _saved_mujoco_data(state).model
+        return all(getattr(model, s) == getattr(base.model, s) for s in ("nq", "nv", "nu", "na", "nbody", "ngeom"))
+    return True
+
+
+def restore_episode(env: gym.Env, state: dict[str, Any]) -> bool:
+    """Put ``env``, just reset, into the episode in progress that :func:`episode_state` saved; False (and ``env``
+    left as reset) where the state does not fit this environment: other wrappers, or another MuJoCo model."""
+    if not _fits(env, state):
+        return False
+    chain = _chain(env)
+    base = chain[-1]
+    if "copies" in state:
+        for copy, saved in zip(base.envs, state["copies"]):
+            restore_episode(copy, saved)
         base._autoreset_envs = _array(state["autoreset"]).astype(bool)
         for wrapper, counters in zip(chain[:-1], state["counters"]):
             for key, value in counters.items():
@@ -280,14 +298,7 @@ def restore_episode(env: gym.Env, state: dict[str, Any]) -> bool:
     if "mujoco_data" in state:
         import mujoco
 
-        if not hasattr(base, "data"):
-            return False
-        saved = mujoco.MjData.__new__(mujoco.MjData)
-        saved.__setstate__(np.asarray(state["mujoco_data"], dtype=np.uint8).tobytes())
-        sizes = ("nq", "nv", "nu", "na", "nbody", "ngeom")
-        if any(getattr(saved.model, s) != getattr(base.model, s) for s in sizes):
-            return False
-        mujoco.mj_copyData(base.data, base.model, saved)
+        mujoco.mj_copyData(base.data, base.model, _saved_mujoco_data(state))
     else:
         for key in CLASSIC_STATE:
             if key in state:

@@ -4,8 +4,8 @@ the final parameters recorded in ``tests/data/pinned.json``.
 A refactoring of the loops (the training harness, the on-policy core) must not change what is learned; this test
 fails on any change that does. The same code and seed give different bits on different CPUs (MKL takes other
 kernels on AMD than on Intel; the last digits differ, and training amplifies them), so the file holds one set of
-pins per CPU it was recorded on (``platform()``: vendor, model, PyTorch's CPU capability), and a run must reproduce
-the pins of one of them. A change that *means* to change training (a fixed bug) re-records the pins with
+pins per CPU it was recorded on (:func:`rlcore.runs.cpu_model`: vendor, model, PyTorch's CPU capability), and a
+run must reproduce the pins of one of them. A change that *means* to change training (a fixed bug) re-records the pins with
 
     python tests/test_pinned.py --record          # this CPU's pins only; the others are dropped
 
@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+
+from rlcore.runs import cpu_model
 
 PINS = Path(__file__).parent / "data" / "pinned.json"
 
@@ -67,13 +69,6 @@ def fingerprint(name: str, tmp: Path) -> dict:
             "params_sha256": hashlib.sha256(params).hexdigest()}
 
 
-def platform() -> str:
-    """The CPU the pins hold for: vendor, model name and PyTorch's CPU capability."""
-    from rlcore.runs import cpu_model
-
-    return cpu_model()
-
-
 def recorded() -> dict[str, dict]:
     """``{platform: {run name: fingerprint}}`` from ``pinned.json``."""
     return json.loads(PINS.read_text())["platforms"]
@@ -85,7 +80,7 @@ def test_default_training_is_unchanged(name, tmp_path):
     got = fingerprint(name, tmp_path)
     matches = [p for p, pins in platforms.items() if pins[name] == got]
     assert matches, (f"{name}: the run reproduces the pins of none of the {len(platforms)} recorded CPUs "
-                     f"({'; '.join(platforms)}); this one is {platform()}. A change to training re-records with "
+                     f"({'; '.join(platforms)}); this one is {cpu_model()}. A change to training re-records with "
                      f"`python tests/test_pinned.py --record`")
 
 
@@ -100,9 +95,9 @@ if __name__ == "__main__" and ("--record" in sys.argv or "--add-platform" in sys
     with tempfile.TemporaryDirectory() as tmp:
         pins = {name: fingerprint(name, Path(tmp)) for name in RUNS}
     platforms = recorded() if "--add-platform" in sys.argv and PINS.exists() else {}
-    platforms[platform()] = pins
+    platforms[cpu_model()] = pins
     PINS.parent.mkdir(exist_ok=True)
     lines = [f"  {json.dumps(p)}: {{\n" + ",\n".join(f"   {json.dumps(k)}: {json.dumps(v)}" for k, v in runs.items())
              + "\n  }" for p, runs in platforms.items()]
     PINS.write_text('{\n "platforms": {\n' + ",\n".join(lines) + "\n }\n}\n")
-    print(f"recorded {len(pins)} pins for {platform()} in {PINS} ({len(platforms)} CPUs in all)")
+    print(f"recorded {len(pins)} pins for {cpu_model()} in {PINS} ({len(platforms)} CPUs in all)")

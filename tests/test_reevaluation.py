@@ -111,7 +111,7 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
 
     assert main(["experiments", "reevaluate", "tiny-ppo", "--only", "nope", "--results",
                  str(tmp_path / "results")]) == 2
-    assert "has no configuration ['nope']" in capsys.readouterr().err
+    assert "tiny-ppo has no run 'nope'; its runs: ppo." in capsys.readouterr().err
 
 
 def test_stored_computes_once_writes_only_when_asked_and_reads_back_the_same_params(tiny_ppo, tmp_path, monkeypatch):

@@ -48,6 +48,7 @@ from rlcore.experiments.registry import (  # noqa: F401
     run_paths,
 )
 from rlcore.experiments.runner import (  # noqa: F401
+    chosen_runs,
     config_class,
     distributed_command,
     export_policy,

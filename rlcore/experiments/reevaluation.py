@@ -68,21 +68,27 @@ def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[
     return value
 
 
+def _episodes(s: SeedResult, env_id: str, episodes: int, first_reset_seed: int,
+              env_kwargs: dict[str, Any] | None = None) -> dict[str, list]:
+    """Per-episode returns and lengths of ``s``'s final policy, episode ``i`` from ``reset(seed=first_reset_seed + i)``,
+    evaluated now."""
+    from rlcore.envs import make_env
+    from rlcore.evaluate import episode_rewards
+
+    env = make_env(env_id, **(env_kwargs or {}))
+    try:
+        rewards = episode_rewards(s.policy, env, episodes=episodes, seed=first_reset_seed)
+    finally:
+        env.close()
+    return {"returns": [float(r.sum()) for r in rewards], "lengths": [len(r) for r in rewards]}
+
+
 def stored_returns(s: SeedResult, env_id: str, episodes: int, first_reset_seed: int) -> np.ndarray:
     """Per-episode returns of ``s``'s final policy, episode ``i`` from ``reset(seed=first_reset_seed + i)``:
     :func:`stored` as ``returns``, else evaluated now."""
-    def compute() -> dict[str, Any]:
-        from rlcore.envs import make_env
-        from rlcore.evaluate import evaluate_policy
-
-        env = make_env(env_id)
-        try:
-            return {"returns": evaluate_policy(s.policy, env, episodes=episodes, seed=first_reset_seed).tolist()}
-        finally:
-            env.close()
-
     params = {"env_id": env_id, "episodes": episodes, "first_reset_seed": first_reset_seed}
-    return np.asarray(stored(s, "returns", params, compute)["returns"], dtype=float)
+    value = stored(s, "returns", params, lambda: {"returns": _episodes(s, env_id, episodes, first_reset_seed)["returns"]})
+    return np.asarray(value["returns"], dtype=float)
 
 
 def stored_reward_anatomy(s: SeedResult, env_id: str, episodes: int, first_reset_seed: int) -> dict[str, float]:
@@ -96,21 +102,10 @@ def stored_reward_anatomy(s: SeedResult, env_id: str, episodes: int, first_reset
 
 def _final_episodes(s: SeedResult, env_id: str, env_kwargs: dict[str, Any], episodes: int,
                     write: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
-    def compute() -> dict[str, Any]:
-        from rlcore.envs import make_env
-        from rlcore.evaluate import episode_rewards
-
-        env = make_env(env_id, **env_kwargs)
-        try:
-            rewards = episode_rewards(s.policy, env, episodes=episodes, seed=s.seed + 10_000)
-        finally:
-            env.close()
-        return {"returns": [float(r.sum()) for r in rewards], "lengths": [len(r) for r in rewards]}
-
     params = {"episodes": episodes, "first_reset_seed": s.seed + 10_000,
               "what": "per-episode return and length of the final deterministic policy (policy.pt), episode i "
                       "from reset(seed=first_reset_seed + i)"}
-    value = stored(s, FINAL, params, compute, write)
+    value = stored(s, FINAL, params, lambda: _episodes(s, env_id, episodes, s.seed + 10_000, env_kwargs), write)
     return np.asarray(value["returns"], dtype=float), np.asarray(value["lengths"])
 
 

@@ -130,17 +130,22 @@ def schedule(pool: Any, fn: Callable[..., Any], calls: list[tuple], jobs: int):
         raise
 
 
-def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
-                   results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
-    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time."""
+def chosen_runs(name: str, only: list[str] | None = None) -> list[RunSpec]:
+    """The runs of experiment ``name`` that ``--only`` names (all without it); an unknown name is an error."""
     exp = get_experiment(name)
     names = [spec.name for spec in exp.runs]
     unknown = sorted(set(only or ()) - set(names))
     if unknown:
         raise ValueError(f"{name} has no run {', '.join(map(repr, unknown))}; its runs: {', '.join(names)}.")
-    tasks = [(spec, s) for spec in exp.runs if not only or spec.name in only
-             for s in spec.seeds if seeds is None or s in seeds]
+    return [spec for spec in exp.runs if not only or spec.name in only]
+
+
+def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
+                   results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
+    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time."""
+    chosen = chosen_runs(name, only)
+    tasks = [(spec, s) for spec in chosen for s in spec.seeds if seeds is None or s in seeds]
     if not tasks:
-        known = sorted({s for spec in exp.runs if not only or spec.name in only for s in spec.seeds})
+        known = sorted({s for spec in chosen for s in spec.seeds})
         raise ValueError(f"{name} has no seed {seeds} in the runs chosen; their seeds: {known}.")
     return _train_all(name, tasks, jobs, results, work)
