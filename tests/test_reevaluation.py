@@ -11,6 +11,7 @@ from rlcore.experiments.reevaluation import (action_clipping_returns, final_poli
                                              trained_before_clipping_fix)
 from rlcore.evaluate import evaluate_policy
 from rlcore.ppo import Config, train
+from rlcore.runs import cpu_model
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +95,7 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
     (record,) = record["records"]
     value = record["value"]
     assert len(value["returns"]) == 2 and value["lengths"] == [200, 200] and record["params"]["first_reset_seed"] == 10_000
-    assert {"command", "commit", "versions", "cpu"} <= set(record)
+    assert {"command", "commit", "versions", "machine"} <= set(record) and record["machine"]["cpu"] == cpu_model()
     reevaluation._FINALS.clear()
     live = np.array([evaluate_policy(s.policy, _pendulum(), 2, seed=s.seed + 10_000).mean() for s in run.seeds])
     np.testing.assert_array_equal(final_policy_returns(run, episodes=2), live)  # stored on this processor

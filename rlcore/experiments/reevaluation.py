@@ -48,7 +48,7 @@ def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[
     was stored with the same ``params`` for the same ``policy.pt``; otherwise ``compute()`` now, and, with ``write``
     (default: the environment variable ``RLCORE_STORE_REEVALUATIONS=1``), store it there with the command, the commit
     and the processor (one record per ``params``). ``compute`` returns a dict of numbers and lists of numbers."""
-    from rlcore.runs import cpu_model, run_metadata
+    from rlcore.runs import run_metadata
 
     path = s.folder / f"{name}.json"
     sha = _policy_sha256(s.folder)
@@ -59,7 +59,7 @@ def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[
     value = compute()
     from_a_page = write is None and os.environ.get(STORE) == "1"
     if write or from_a_page:
-        meta = run_metadata(cpu=cpu_model())
+        meta = run_metadata()  # names the processor (machine.cpu)
         if from_a_page:  # inside a page's kernel the process's own command line says nothing
             meta["command"] = f"{STORE}=1 jupyter-book build .  # computed by the page that quotes it"
         records = [r for r in records if r["params"] != params]
