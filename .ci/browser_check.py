@@ -19,6 +19,7 @@ For every page of _toc.yml it fails on
 - a page with TeX (in its source, or math elements in its HTML) where MathJax did not load from the book itself,
   left math untypeset, or reported an error (<mjx-merror>);
 - an internal link (same site) to a file that does not exist, or to an #anchor the target page does not have;
+- more than one search box in view (a header bar's on top of the sidebar's);
 
 and saves a screenshot of the top of each page, plus one of its first equation where it has math, under
 `_build/browser/`. The exit status is 0 when every page passes, 1 otherwise; each problem is printed.
@@ -164,6 +165,8 @@ _INSPECT = """async (timeoutMs) => {
         mathjaxScripts: [...document.scripts].map(s => s.src).filter(src => /mathjax/i.test(src)),
         mathjaxLoaded: !!(window.MathJax && window.MathJax.startup && window.MathJax.version),
         links: [...document.querySelectorAll("a[href]")].map(a => a.href),
+        searchBoxes: [...document.querySelectorAll(".search-button-field, form.bd-search, input[type=search]")]
+            .filter(el => el.getClientRects().length > 0 && el.getBoundingClientRect().height > 0).length,
     };
     if (result.mathjaxLoaded) {
         result.typesetTimedOut = (await Promise.race([window.MathJax.startup.promise, timeout()])) === "timeout";
@@ -261,6 +264,9 @@ def check_page(context, site_url: str, html_dir: Path, page: str, source: Path |
         else:
             result.known.append(f"{message} (known: {why})")
 
+    if info["searchBoxes"] > 1:
+        result.problems.append(f"{info['searchBoxes']} search boxes in view at once (the theme's header bar and the "
+                               "sidebar each have one: keep the sidebar's)")
     result.images = len(info["images"])
     result.problems.extend(f"image does not decode: {img['src']}" for img in info["images"] if not img["ok"])
 
