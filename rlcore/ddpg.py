@@ -16,7 +16,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
@@ -229,8 +229,13 @@ def saved_policy(actor: Actor, scaler: ObservationScaler | None) -> Deterministi
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
-          out: str | Path | None = None, progress: bool = False) -> Result:
-    """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint)."""
+          out: str | Path | None = None, progress: bool = False, probe: Callable[..., None] | None = None) -> Result:
+    """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint).
+
+    ``probe``, for diagnostics only, is called before every critic update with that update's arguments
+    (``probe(step, critic, actor_target, critic_target, obs, actions, rewards, next_obs, terminated, gamma)``); it
+    must only read them, so that the run stays the run it would be without it (:mod:`rlcore.experiments.critic_trace`).
+    """
     check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
@@ -294,10 +299,11 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
             # [ddpg-learn]
             if step >= config.learning_starts:
                 b = buffer.sample(config.batch_size)
-                o = scaled(b.obs)
-                update_critic(critic, critic_opt, actor_t, critic_t, o, torch.as_tensor(b.actions),
-                              torch.as_tensor(b.rewards), scaled(b.next_obs), torch.as_tensor(b.terminated),
-                              config.gamma)
+                o, a, r, o2, d = (scaled(b.obs), torch.as_tensor(b.actions), torch.as_tensor(b.rewards),
+                                  scaled(b.next_obs), torch.as_tensor(b.terminated))
+                if probe is not None:
+                    probe(step, critic, actor_t, critic_t, o, a, r, o2, d, config.gamma)
+                update_critic(critic, critic_opt, actor_t, critic_t, o, a, r, o2, d, config.gamma)
                 update_actor(actor, actor_opt, critic, o)
                 soft_update(actor_t, actor, config.tau)
                 soft_update(critic_t, critic, config.tau)

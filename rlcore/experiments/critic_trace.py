@@ -1,0 +1,155 @@
+"""Watching DDPG's critic inside a stored run: one seed re-trained from the start with the same code, config and
+seed, with the critic's targets y, estimates Q and loss recorded every ``every`` learning steps.
+
+Training is deterministic per seed on one machine and thread count, so the re-run *is* the stored run: the record
+keeps the re-run's evaluations beside the stored ones (:func:`matches_stored` compares them), and a page that shows
+the trace checks that they agree before it says anything about the stored run::
+
+    python -m rlcore.experiments.critic_trace ddpg-modern-1m/humanoid --seeds 1,2 --steps 100000 \\
+        --out results/diagnostics/ddpg-modern-1m-humanoid-critic.json
+
+A probe only reads what the critic update is given (:class:`CriticProbe`, passed to :func:`rlcore.ddpg.train`);
+the record holds, per seed, one row per probed update (:data:`COLUMNS`) and the provenance.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+COLUMNS = ("step", "learn_step", "y_mean", "y_max", "q_mean", "q_absmax", "loss", "r_mean", "obs_clipped")
+"""One row per probed update: environment step, learning step (1 = the first update), the minibatch's mean and
+largest target y, its mean and largest |Q(s, a)|, the loss (1/N) sum (y - Q)^2, its mean reward (as learned, after
+``reward_scale``), and the share of its normalized observations at the +-10 clip."""
+
+
+def critic_stats(critic: torch.nn.Module, actor_t: torch.nn.Module, critic_t: torch.nn.Module, obs: torch.Tensor,
+                 actions: torch.Tensor, rewards: torch.Tensor, next_obs: torch.Tensor, terminated: torch.Tensor,
+                 gamma: float, clip: float = 10.0) -> dict[str, float]:
+    """What one critic update is about to regress on: the targets y (as :func:`rlcore.ddpg.critic_target` makes
+    them), the critic's Q(s, a) on the same minibatch, their squared error, and the critic's weight norms."""
+    from rlcore.ddpg import critic_target
+
+    with torch.no_grad():
+        y = critic_target(actor_t, critic_t, next_obs, rewards, terminated, gamma)
+        q = critic(obs, actions)
+        return {"y_mean": float(y.mean()), "y_max": float(y.max()), "q_mean": float(q.mean()),
+                "q_absmax": float(q.abs().max()), "loss": float(((q - y) ** 2).mean()),
+                "r_mean": float(rewards.mean()), "obs_clipped": float((obs.abs() >= clip).float().mean()),
+                "weight_norms": [float(p.norm()) for p in critic.parameters() if p.dim() == 2]}
+
+
+@dataclass
+class CriticProbe:
+    """Called before every critic update of :func:`rlcore.ddpg.train`; records :func:`critic_stats` on the 1st,
+    (every+1)-th, (2 every+1)-th ... update. It computes with ``no_grad`` and draws no random numbers, so the run
+    it watches is the run without it."""
+
+    every: int = 500
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    updates: int = 0
+
+    def __post_init__(self) -> None:
+        if self.every < 1:
+            raise ValueError(f"every must be at least 1, got {self.every}")
+
+    def __call__(self, step: int, critic, actor_t, critic_t, obs, actions, rewards, next_obs, terminated,
+                 gamma: float) -> None:
+        self.updates += 1
+        if (self.updates - 1) % self.every == 0:
+            self.rows.append({"step": int(step), "learn_step": self.updates,
+                              **critic_stats(critic, actor_t, critic_t, obs, actions, rewards, next_obs, terminated,
+                                             gamma)})
+
+
+def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 500,
+               progress: bool = False) -> dict[str, Any]:
+    """Re-train ``seed`` of ``experiment/run`` (a DDPG run of the registry) for its first ``steps`` steps with a
+    :class:`CriticProbe`; returns the rows and the re-run's evaluations."""
+    from rlcore import ddpg
+    from rlcore.experiments.runner import chosen_runs
+
+    spec = chosen_runs(experiment, [run])[0]
+    if spec.algo != "ddpg":
+        raise ValueError(f"{experiment}/{run} is a {spec.algo} run; the critic trace watches DDPG runs only")
+    if not 0 < steps <= spec.steps:
+        raise ValueError(f"--steps must be between 1 and the run's {spec.steps:,} steps, got {steps:,}")
+    probe = CriticProbe(every)
+    res = ddpg.train(spec.env_id, ddpg.make_config(spec.algo, **spec.overrides), steps=steps, seed=seed,
+                     out=None, progress=progress, probe=probe)
+    return {"rows": probe.rows, "eval_steps": [int(s) for s in res.eval_steps],
+            "eval_returns": [float(r) for r in res.eval_returns]}
+
+
+def trace(experiment_run: str, seeds: list[int], steps: int, every: int = 500,
+          progress: bool = False) -> dict[str, Any]:
+    """:func:`trace_seed` for each seed of ``experiment/run``, with what the run is."""
+    from rlcore.experiments.runner import chosen_runs
+
+    experiment, _, run = experiment_run.partition("/")
+    if not run:
+        raise ValueError(f"expected EXPERIMENT/RUN such as ddpg-modern-1m/humanoid, got {experiment_run!r}")
+    spec = chosen_runs(experiment, [run])[0]
+    return {"experiment": experiment, "run": run, "env_id": spec.env_id, "overrides": spec.overrides,
+            "steps": steps, "every": every, "columns": list(COLUMNS),
+            "seeds": {str(s): trace_seed(experiment, run, s, steps, every, progress) for s in seeds}}
+
+
+def matches_stored(seed_trace: dict[str, Any], stored_evals: dict[str, np.ndarray]) -> bool:
+    """Whether the re-run's evaluations equal the stored run's at every step both have (to float64 rounding):
+    then the trace is the stored run's."""
+    stored = dict(zip(np.asarray(stored_evals["step"]).astype(int).tolist(),
+                      np.asarray(stored_evals["mean_return"], dtype=float).tolist()))
+    pairs = [(r, stored[s]) for s, r in zip(seed_trace["eval_steps"], seed_trace["eval_returns"]) if s in stored]
+    return bool(pairs) and all(abs(a - b) <= 1e-9 * max(1.0, abs(b)) for a, b in pairs)
+
+
+def load_trace(path: str | Path) -> dict[str, Any]:
+    """A stored trace, each seed's rows as arrays per column (``trace["seeds"]["2"]["y_mean"]``)."""
+    record = json.loads(Path(path).read_text())
+    for s in record["seeds"].values():
+        for c in COLUMNS:
+            s[c] = np.array([row[c] for row in s["rows"]], dtype=float)
+        s["weight_norms"] = np.array([row["weight_norms"] for row in s["rows"]], dtype=float)
+    return record
+
+
+def main(argv: list[str] | None = None) -> int:
+    from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, seed_list
+    from rlcore.runs import run_metadata, torch_threads, write_json
+
+    p = Parser(prog="python -m rlcore.experiments.critic_trace", description=__doc__.split("\n\n")[0])
+    p.add_argument("run", metavar="EXPERIMENT/RUN", help="a DDPG run of the registry, e.g. ddpg-modern-1m/humanoid")
+    p.add_argument("--seeds", type=seed_list, required=True, help="comma-separated seeds, e.g. 1,2")
+    p.add_argument("--steps", type=count(1), required=True, help="environment steps to re-train each seed for")
+    p.add_argument("--every", type=count(1), default=500, help="record every this many learning steps (default 500)")
+    p.add_argument("--out", required=True, help="the JSON record to write")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    args = p.parse_args(argv)
+    torch_threads()  # one thread, as `experiments run` trains: the same thread count gives the same run
+    try:
+        record = trace(args.run, args.seeds, args.steps, args.every, progress=not args.no_progress)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("\nInterrupted; nothing written (a trace is a re-run from step 0: run the command again).",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
+    write_json(args.out, {**record, "provenance": run_metadata()})
+    for seed, s in record["seeds"].items():
+        last = s["rows"][-1]
+        print(f"seed {seed}: at learning step {last['learn_step']:,} mean y {last['y_mean']:,.0f}, "
+              f"max y {last['y_max']:,.0f}, loss {last['loss']:,.0f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,76 @@
+"""rlcore.experiments.critic_trace: watching DDPG's critic without changing the run it watches."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from rlcore import ddpg
+from rlcore.experiments import critic_trace
+
+SMALL = dict(hidden=(32, 32), learning_starts=300, batch_size=32, buffer_size=5_000, eval_every=400,
+             eval_episodes=1, normalize_obs=True)
+
+
+def test_a_probed_run_is_the_run_without_the_probe(tmp_path):
+    torch.set_num_threads(1)
+    plain = ddpg.train("Pendulum-v1", ddpg.Config(**SMALL), steps=1_200, seed=3)
+    probe = critic_trace.CriticProbe(every=100)
+    probed = ddpg.train("Pendulum-v1", ddpg.Config(**SMALL), steps=1_200, seed=3, probe=probe)
+    assert plain.eval_returns.tolist() == probed.eval_returns.tolist()
+    for a, b in zip(plain.critic.parameters(), probed.critic.parameters()):
+        assert torch.equal(a, b)
+    assert probe.updates == 1_200 - 300 + 1  # one per step from the learning_starts-th on
+    assert [r["learn_step"] for r in probe.rows] == list(range(1, 902, 100))
+    assert [r["step"] for r in probe.rows] == list(range(300, 1_201, 100))  # steps taken when the update ran
+    assert all(r["obs_clipped"] == 0.0 for r in probe.rows)  # Pendulum's normalized observations stay small
+    assert all(len(r["weight_norms"]) == 3 for r in probe.rows)
+
+
+def test_stats_are_the_update_s_own_target_and_loss():
+    torch.manual_seed(0)
+    critic, critic_t = ddpg.Critic(3, 1, (8,)), ddpg.Critic(3, 1, (8,))
+    actor_t = ddpg.Actor(3, 1, (8,), low=[-2.0], high=[2.0])
+    obs, next_obs = torch.randn(16, 3), torch.randn(16, 3)
+    actions, rewards, done = torch.rand(16, 1) * 4 - 2, torch.randn(16), (torch.rand(16) < 0.3).float()
+    stats = critic_trace.critic_stats(critic, actor_t, critic_t, obs, actions, rewards, next_obs, done, 0.9)
+    y = ddpg.critic_target(actor_t, critic_t, next_obs, rewards, done, 0.9)
+    assert stats["y_mean"] == pytest.approx(float(y.mean())) and stats["y_max"] == pytest.approx(float(y.max()))
+    loss = ddpg.update_critic(critic, torch.optim.SGD(critic.parameters(), lr=0.0), actor_t, critic_t, obs,
+                              actions, rewards, next_obs, done, 0.9)
+    assert stats["loss"] == pytest.approx(loss)
+    assert stats["q_absmax"] >= abs(stats["q_mean"])
+
+
+def test_a_trace_matches_a_stored_run_only_where_every_shared_evaluation_agrees():
+    stored = {"step": np.array([20_000, 40_000, 60_000]), "mean_return": np.array([181.4, 235.5, 212.6])}
+    assert critic_trace.matches_stored({"eval_steps": [20_000, 40_000], "eval_returns": [181.4, 235.5]}, stored)
+    assert not critic_trace.matches_stored({"eval_steps": [20_000, 40_000], "eval_returns": [181.4, 235.6]}, stored)
+    assert not critic_trace.matches_stored({"eval_steps": [10_000], "eval_returns": [181.4]}, stored)
+
+
+def test_a_stored_trace_loads_as_arrays(tmp_path):
+    rows = [{c: float(i) for c in critic_trace.COLUMNS} | {"weight_norms": [1.0, 2.0, 3.0]} for i in range(3)]
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps({"seeds": {"2": {"rows": rows, "eval_steps": [], "eval_returns": []}}}))
+    s = critic_trace.load_trace(path)["seeds"]["2"]
+    assert s["y_mean"].tolist() == [0.0, 1.0, 2.0] and s["weight_norms"].shape == (3, 3)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["ddpg-modern-1m/no-such-run", "--seeds", "0", "--steps", "10"], "has no run"),
+    (["ppo-mujoco-1m/hopper", "--seeds", "0", "--steps", "10"], "DDPG runs only"),
+    (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "2000000"], "between 1 and"),
+    (["ddpg-modern-1m", "--seeds", "0", "--steps", "10"], "EXPERIMENT/RUN"),
+    (["ddpg-modern-1m/humanoid", "--seeds", "x", "--steps", "10"], "comma-separated"),
+])
+def test_the_command_line_refuses_bad_input_in_one_line(tmp_path, capsys, argv, message):
+    out = tmp_path / "t.json"
+    try:
+        code = critic_trace.main([*argv, "--out", str(out)])
+    except SystemExit as exc:  # argparse's own refusals
+        code = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("error:") and message in err[0], err
+    assert not out.exists()
