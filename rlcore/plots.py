@@ -172,3 +172,29 @@ def plot_scaling(record: Mapping, axes=None):
     for ax in axes:
         ax.grid(alpha=0.3)
     return axes
+
+
+def plot_critic_trace(record: Mapping, axes=None, gamma: float = 0.99):
+    """Two panels from :mod:`rlcore.experiments.critic_trace`'s record (loaded with ``load_trace``): each seed's
+    mean critic target y against learning steps, on a log scale, with the discounted value of receiving the
+    minibatches' mean reward forever, r / (1 - gamma), as a dashed line; and each seed's critic loss. Returns the
+    axes."""
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    if axes is None:
+        _, axes = plt.subplots(1, 2, figsize=(10, 3.4))
+    rewards = []
+    for seed, s in record["seeds"].items():
+        (line,) = axes[0].semilogy(s["learn_step"], np.maximum(s["y_mean"], 1e-3), label=f"seed {seed}")
+        axes[1].semilogy(s["learn_step"], np.maximum(s["loss"], 1e-6), color=line.get_color(), label=f"seed {seed}")
+        rewards.append(s["r_mean"])
+    forever = float(np.mean(np.concatenate(rewards))) / (1 - gamma)
+    axes[0].axhline(forever, color="0.4", ls="--", lw=1, label=f"mean reward / (1 - γ) ≈ {forever:,.0f}")
+    axes[0].set(xlabel="learning steps", ylabel="mean target y (log)", title="the critic's targets")
+    axes[1].set(xlabel="learning steps", ylabel="critic loss (log)", title="the critic's loss")
+    for ax in axes:
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e3:g}k" if x else "0"))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    return axes

@@ -43,6 +43,19 @@ def test_stats_are_the_update_s_own_target_and_loss():
     assert stats["q_absmax"] >= abs(stats["q_mean"])
 
 
+def test_a_what_if_changes_the_setting_it_names_and_says_so(monkeypatch):
+    seen = {}
+
+    def fake_train(env_id, config, steps, seed, out, progress, probe):
+        seen.update(config=config, steps=steps, seed=seed)
+        return type("R", (), {"eval_steps": np.array([20_000]), "eval_returns": np.array([1.0])})()
+
+    monkeypatch.setattr(ddpg, "train", fake_train)
+    record = critic_trace.trace("ddpg-modern-1m/humanoid", [2], 20_000, changes={"critic_lr": 3e-4})
+    assert seen["config"].critic_lr == 3e-4 and seen["config"].normalize_obs and seen["seed"] == 2
+    assert record["changes"] == {"critic_lr": 3e-4} and record["seeds"]["2"]["eval_returns"] == [1.0]
+
+
 def test_a_trace_matches_a_stored_run_only_where_every_shared_evaluation_agrees():
     stored = {"step": np.array([20_000, 40_000, 60_000]), "mean_return": np.array([181.4, 235.5, 212.6])}
     assert critic_trace.matches_stored({"eval_steps": [20_000, 40_000], "eval_returns": [181.4, 235.5]}, stored)
@@ -64,6 +77,7 @@ def test_a_stored_trace_loads_as_arrays(tmp_path):
     (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "2000000"], "between 1 and"),
     (["ddpg-modern-1m", "--seeds", "0", "--steps", "10"], "EXPERIMENT/RUN"),
     (["ddpg-modern-1m/humanoid", "--seeds", "x", "--steps", "10"], "comma-separated"),
+    (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "10", "--set", "critic_rate=1"], "no field"),
 ])
 def test_the_command_line_refuses_bad_input_in_one_line(tmp_path, capsys, argv, message):
     out = tmp_path / "t.json"

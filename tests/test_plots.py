@@ -65,3 +65,21 @@ def test_plot_scaling_draws_one_speed_up_line_per_way_of_sharing_and_the_learnin
     np.testing.assert_allclose(lines["sharing rollouts"].get_xydata(), [[1, 1.0], [2, 1.9]])
     np.testing.assert_allclose(lines["linear"].get_xydata(), [[1, 1], [2, 2]])
     assert [line.get_label() for line in curves.get_lines()] == ["1 worker", "2 workers, sharing gradients"]
+
+
+def test_plot_critic_trace_draws_each_seed_s_targets_and_loss_and_the_reward_forever_line():
+    import matplotlib.pyplot as plt
+
+    from rlcore.plots import plot_critic_trace
+
+    steps = np.array([1.0, 501.0, 1001.0])
+    record = {"seeds": {"1": {"learn_step": steps, "y_mean": np.array([5.0, 50.0, 400.0]),
+                              "loss": np.array([1.0, 2.0, 3.0]), "r_mean": np.array([4.0, 5.0, 6.0])},
+                        "2": {"learn_step": steps, "y_mean": np.array([5.0, 1e3, 1e6]),
+                              "loss": np.array([1.0, 1e4, 1e9]), "r_mean": np.array([5.0, 5.0, 5.0])}}}
+    axes = plot_critic_trace(record)
+    assert [len(ax.lines) for ax in axes] == [3, 2]  # two seeds (and the dashed line on the left)
+    assert axes[0].get_yscale() == "log" and axes[1].get_yscale() == "log"
+    assert axes[0].lines[2].get_ydata()[0] == pytest.approx(500.0)  # the mean reward 5 / (1 - 0.99)
+    assert axes[1].lines[1].get_ydata().tolist() == [1.0, 1e4, 1e9]
+    plt.close("all")

@@ -64,6 +64,7 @@ from rlcore.experiments.results import (  # noqa: F401
     load_or_train,
     provenance_markdown,
     live_provenance_markdown,
+    record_provenance_markdown,
     status_lines,
 )
 from rlcore.experiments.analysis import (  # noqa: F401

@@ -9,7 +9,8 @@ the trace checks that they agree before it says anything about the stored run::
         --out results/diagnostics/ddpg-modern-1m-humanoid-critic.json
 
 A probe only reads what the critic update is given (:class:`CriticProbe`, passed to :func:`rlcore.ddpg.train`);
-the record holds, per seed, one row per probed update (:data:`COLUMNS`) and the provenance.
+the record holds, per seed, one row per probed update (:data:`COLUMNS`) and the provenance. ``--set key=value``
+asks a what-if instead (``--set critic_lr=3e-4``): the same seed with a changed setting, no longer the stored run.
 """
 
 from __future__ import annotations
@@ -69,10 +70,11 @@ class CriticProbe:
                                              gamma)})
 
 
-def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 500,
-               progress: bool = False) -> dict[str, Any]:
+def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 500, progress: bool = False,
+               changes: dict[str, Any] | None = None) -> dict[str, Any]:
     """Re-train ``seed`` of ``experiment/run`` (a DDPG run of the registry) for its first ``steps`` steps with a
-    :class:`CriticProbe`; returns the rows and the re-run's evaluations."""
+    :class:`CriticProbe`; returns the rows and the re-run's evaluations. ``changes`` overrides Config fields of the
+    run (then it is a different run, and its evaluations will not match the stored ones)."""
     from rlcore import ddpg
     from rlcore.experiments.runner import chosen_runs
 
@@ -82,14 +84,14 @@ def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 50
     if not 0 < steps <= spec.steps:
         raise ValueError(f"--steps must be between 1 and the run's {spec.steps:,} steps, got {steps:,}")
     probe = CriticProbe(every)
-    res = ddpg.train(spec.env_id, ddpg.make_config(spec.algo, **spec.overrides), steps=steps, seed=seed,
+    res = ddpg.train(spec.env_id, ddpg.make_config(spec.algo, **{**spec.overrides, **(changes or {})}), steps=steps, seed=seed,
                      out=None, progress=progress, probe=probe)
     return {"rows": probe.rows, "eval_steps": [int(s) for s in res.eval_steps],
             "eval_returns": [float(r) for r in res.eval_returns]}
 
 
-def trace(experiment_run: str, seeds: list[int], steps: int, every: int = 500,
-          progress: bool = False) -> dict[str, Any]:
+def trace(experiment_run: str, seeds: list[int], steps: int, every: int = 500, progress: bool = False,
+          changes: dict[str, Any] | None = None) -> dict[str, Any]:
     """:func:`trace_seed` for each seed of ``experiment/run``, with what the run is."""
     from rlcore.experiments.runner import chosen_runs
 
@@ -98,8 +100,8 @@ def trace(experiment_run: str, seeds: list[int], steps: int, every: int = 500,
         raise ValueError(f"expected EXPERIMENT/RUN such as ddpg-modern-1m/humanoid, got {experiment_run!r}")
     spec = chosen_runs(experiment, [run])[0]
     return {"experiment": experiment, "run": run, "env_id": spec.env_id, "overrides": spec.overrides,
-            "steps": steps, "every": every, "columns": list(COLUMNS),
-            "seeds": {str(s): trace_seed(experiment, run, s, steps, every, progress) for s in seeds}}
+            "changes": changes or {}, "steps": steps, "every": every, "columns": list(COLUMNS),
+            "seeds": {str(s): trace_seed(experiment, run, s, steps, every, progress, changes) for s in seeds}}
 
 
 def matches_stored(seed_trace: dict[str, Any], stored_evals: dict[str, np.ndarray]) -> bool:
@@ -122,7 +124,7 @@ def load_trace(path: str | Path) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, seed_list
+    from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, overrides, seed_list
     from rlcore.runs import run_metadata, torch_threads, write_json
 
     p = Parser(prog="python -m rlcore.experiments.critic_trace", description=__doc__.split("\n\n")[0])
@@ -131,11 +133,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=count(1), required=True, help="environment steps to re-train each seed for")
     p.add_argument("--every", type=count(1), default=500, help="record every this many learning steps (default 500)")
     p.add_argument("--out", required=True, help="the JSON record to write")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="change a Config field of the run (repeatable): a what-if, no longer the stored run")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     torch_threads()  # one thread, as `experiments run` trains: the same thread count gives the same run
     try:
-        record = trace(args.run, args.seeds, args.steps, args.every, progress=not args.no_progress)
+        from rlcore.ddpg import Config
+
+        changes = overrides(Config, args.set or [])
+        record = trace(args.run, args.seeds, args.steps, args.every, progress=not args.no_progress,
+                       changes=changes)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -182,6 +182,18 @@ def live_provenance_markdown(label: str, what: str, command: str | None = None) 
     return f"::::{{dropdown}} Provenance: {label}\n{text}\n::::\n"
 
 
+def record_provenance_markdown(label: str, path: str, record: dict[str, Any], what: str) -> str:
+    """The provenance of a derived record in ``results/`` (a comparison, a diagnostic) in a collapsed dropdown
+    ("Provenance: <label>"): its file, the command that wrote it, the commit, time and versions of the process that
+    did (``record["provenance"]``, :func:`rlcore.runs.run_metadata`), and ``what`` it measures."""
+    prov = record["provenance"]
+    v = prov["versions"]
+    return (f"::::{{dropdown}} Provenance: {label}\n"
+            f"`{path}`, written by `{prov['command']}` at commit {commit_text(prov.get('commit') or 'unknown')} "
+            f"({prov['started']}; Python {v.get('python')}, torch {v.get('torch')}, Gymnasium {v.get('gymnasium')}, "
+            f"MuJoCo {v.get('mujoco')}, {prov['machine'].get('torch_threads', '?')} torch thread(s)). {what}\n::::\n")
+
+
 def status_lines(name: str, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
     """One line per run: seeds finished in ``results``, and how far each unfinished one has trained in ``work``."""
     lines = []
