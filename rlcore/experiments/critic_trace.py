@@ -113,6 +113,12 @@ def matches_stored(seed_trace: dict[str, Any], stored_evals: dict[str, np.ndarra
     return bool(pairs) and all(abs(a - b) <= 1e-9 * max(1.0, abs(b)) for a, b in pairs)
 
 
+def row_at(seed_trace: dict[str, Any], learning_steps: int) -> int:
+    """Index of the first row of a loaded seed trace recorded after ``learning_steps`` updates (rows are at update
+    1, every + 1, ...: the row of 20,000 learning steps is update 20,001's)."""
+    return int(np.searchsorted(seed_trace["learn_step"], learning_steps + 1))
+
+
 def load_trace(path: str | Path) -> dict[str, Any]:
     """A stored trace, each seed's rows as arrays per column (``trace["seeds"]["2"]["y_mean"]``)."""
     record = json.loads(Path(path).read_text())
