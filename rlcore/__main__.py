@@ -103,6 +103,11 @@ def cmd_experiments(args: argparse.Namespace) -> int:
                 for path in store_final_policy_returns(run, episodes=args.episodes):
                     print(f"Wrote {path}")
         return 0
+    if args.action == "snapshot":
+        for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
+                                           work=Path(args.work)):
+            print(line)
+        return 0
     if args.action == "run":
         try:
             lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
@@ -151,8 +156,9 @@ def build_parser() -> argparse.ArgumentParser:
     from rlcore.experiments import RESULTS_DIR, WORK_DIR
 
     x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
-    x.add_argument("action", choices=["list", "run", "status", "reevaluate"],
-                   help="reevaluate: evaluate each finished seed's final policy and store its returns in results/")
+    x.add_argument("action", choices=["list", "run", "status", "reevaluate", "snapshot"],
+                   help="reevaluate: evaluate each finished seed's final policy and store its returns in results/; "
+                        "snapshot: copy the logs so far of seeds still training to results/ (no policy)")
     x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
     x.add_argument("--jobs", type=count(1), default=1, help="runs in parallel, one process each (one per core)")
     x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")

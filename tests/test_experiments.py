@@ -172,6 +172,45 @@ def test_run_writes_small_results_and_is_resumable(tiny, tmp_path):
     assert loaded["dqn"].seeds[0].evals["step"].tolist() == [300, 600]
 
 
+def test_snapshot_shows_a_seed_in_training_until_it_finishes(tiny, tmp_path):
+    from rlcore import dqn
+
+    results, work = tmp_path / "results", tmp_path / "runs"
+    spec = next(r for r in tiny.runs if r.name == "dqn")
+    work_dir, result_dir = ex.run_paths("tiny", "dqn", 0, results, work)
+    assert ex.snapshot_experiment("tiny", only=["dqn"], results=results, work=work) == [
+        f"tiny/dqn/seed-0: nothing to snapshot, no training episode in {work_dir} yet"]
+    assert not result_dir.exists()
+    # a seed trained in its work folder (as a long run is between sessions), not yet copied to results/
+    dqn.train(spec.env_id, dqn.make_config("dqn", **spec.overrides), steps=spec.steps, seed=0, out=work_dir)
+    last = int(np.loadtxt(work_dir / "progress.csv", delimiter=",", skiprows=1, ndmin=2)[-1, 1])
+    (line,) = ex.snapshot_experiment("tiny", only=["dqn"], results=results, work=work)
+    assert line == f"tiny/dqn/seed-0: snapshot at step {last:,} of 600 -> {result_dir}"
+    run = ex.load_experiment("tiny", results)["dqn"]
+    assert run.seeds == [] and run.missing == [0] and [s.seed for s in run.in_progress] == [0]
+    snap = run.in_progress[0]
+    assert snap.snapshot["step"] == last and snap.snapshot["steps"] == 600
+    assert snap.evals["step"].tolist() == [300, 600] and snap.config["config"]["hidden"] == [16]
+    assert f"holds a snapshot of its logs at step {last:,}" in ex.status_lines("tiny", results, work)[-1]
+    text = ex.snapshot_markdown("tiny", run)
+    assert text.startswith(f"Seed 0 is still training: `results/tiny/dqn/seed-0/` holds a snapshot of its logs at "
+                           f"step {last:,} of 600")
+    assert "its last evaluation, at step 600, returns" in text and "::::{dropdown} Provenance: dqn, in training" in text
+    ex.check_results("tiny", ex.load_experiment("tiny", results))
+    record = json.loads((result_dir / ex.SNAPSHOT).read_text())
+    (result_dir / ex.SNAPSHOT).write_text(json.dumps({**record, "steps": 900}))
+    with pytest.raises(ValueError, match="snapshot says step"):
+        ex.check_results("tiny", ex.load_experiment("tiny", results))
+    # finishing the seed writes its final files over the snapshot and removes the record
+    assert ex.train_one("tiny", spec, 0, results, work).endswith(f"done -> {result_dir}")
+    assert sorted(p.name for p in result_dir.iterdir()) == ["config.json", "eval.csv", "meta.json", "policy.pt",
+                                                            "progress.csv"]
+    run = ex.load_experiment("tiny", results)["dqn"]
+    assert [s.seed for s in run.seeds] == [0] and run.in_progress == [] and run.missing == []
+    assert ex.snapshot_markdown("tiny", run) == ""
+    assert ex.snapshot_one("tiny", spec, 0, results, work) == f"tiny/dqn/seed-0: finished, already in {result_dir}"
+
+
 def test_unknown_experiment():
     with pytest.raises(ValueError, match="Unknown experiment"):
         ex.get_experiment("nope")

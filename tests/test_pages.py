@@ -53,6 +53,14 @@ def test_check_results_refuses_a_seed_that_differs_from_the_registry(small, chan
         check_results("small", _results(**changes))
 
 
+def test_every_experiment_in_results_is_what_the_registry_says():
+    from rlcore import experiments as ex
+
+    for name in sorted(ex.EXPERIMENTS):
+        check_results(name)
+    assert ex.load_experiment("ddpg-report")["hopper"].seeds  # it read the committed results/, not an empty folder
+
+
 def test_check_results_refuses_seeds_the_registry_does_not_have(small):
     odd = _results()
     odd["base"] = ex.RunResults(SPECS[0], odd["base"].seeds + [_seed(SPECS[0], 7)], [])

@@ -3,6 +3,7 @@
     python -m rlcore experiments list
     python -m rlcore experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
     python -m rlcore experiments status dqn-cartpole
+    python -m rlcore experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
 
 Each run trains in a work folder (``runs/<experiment>/<run>/seed-<s>/``, not committed: it holds
 full checkpoints with replay memories) and, when it finishes, its small outputs are copied to
@@ -11,6 +12,10 @@ full checkpoints with replay memories) and, when it finishes, its small outputs 
     config.json  meta.json     what ran: algorithm, environment, Config, seed, steps; command, versions, commit
     progress.csv eval.csv      per-episode training returns; periodic evaluations of the deterministic policy
     policy.pt                  the final policy's weights only (loads with weights_only=True)
+
+A seed that trains over many sessions can be shown before it finishes: ``experiments snapshot`` copies its logs
+so far to its results folder with a ``snapshot.json`` (and no ``policy.pt``, so it still counts as missing);
+:func:`load_experiment` lists it in ``RunResults.in_progress``.
 
 Chapters read ``results/`` with :func:`load_experiment`; a run that is missing there is reported so
 that the chapter can say so and fall back to a short live run.
@@ -53,6 +58,9 @@ from rlcore.experiments.runner import (  # noqa: F401
     distributed_command,
     export_policy,
     train_one,
+    snapshot_one,
+    snapshot_experiment,
+    SNAPSHOT,
     run_in_pool,
     schedule,
     run_experiment,
@@ -65,6 +73,7 @@ from rlcore.experiments.results import (  # noqa: F401
     provenance_markdown,
     live_provenance_markdown,
     record_provenance_markdown,
+    snapshot_markdown,
     status_lines,
 )
 from rlcore.experiments.analysis import (  # noqa: F401

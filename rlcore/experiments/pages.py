@@ -77,16 +77,17 @@ class PageRuns:
 
 def check_results(name: str, results: dict[str, RunResults] | None = None) -> None:
     """Raise ``ValueError`` unless every seed in ``results/`` for experiment ``name`` is what the registry says:
-    one of its seeds, its environment, its budget (and finished: the last evaluation is at the last step), the
-    registry's overrides of the algorithm's defaults, and every evaluation of the configured number of episodes."""
+    one of its seeds, its environment, its budget (and finished: the last evaluation is at or past it), the
+    registry's overrides of the algorithm's defaults, and every evaluation of the configured number of episodes.
+    A snapshot of a seed still training (``in_progress``) is checked the same way, except that it is unfinished."""
     results = load_experiment(name) if results is None else results
     for spec in get_experiment(name).runs:
         run = results[spec.name]
         if sorted([s.seed for s in run.seeds] + run.missing) != sorted(spec.seeds):
             raise ValueError(f"{name}/{spec.name}: seeds {[s.seed for s in run.seeds]} + missing {run.missing} "
                              f"are not the registry's {list(spec.seeds)}")
-        for s in run.seeds:
-            where = f"{name}/{spec.name}/seed-{s.seed}"
+        for s in run.seeds + run.in_progress:
+            where = f"{name}/{spec.name}/seed-{s.seed}" + (" (snapshot)" if s.snapshot else "")
             config = s.config.get("config", {})
             found = {"seed": (s.config.get("seed"), s.meta.get("seed")), "env_id": s.config.get("env_id"),
                      "steps": s.config.get("steps")}
@@ -96,9 +97,12 @@ def check_results(name: str, results: dict[str, RunResults] | None = None) -> No
             wrong = {k: (found[k], wanted[k]) for k in wanted if found[k] != wanted[k]}
             if wrong:
                 raise ValueError(f"{where}: (found, registry) differ: {wrong}")
-            if s.evals and int(s.evals["step"][-1]) != spec.steps:
+            if s.snapshot and (s.snapshot["steps"] != spec.steps or int(s.progress["step"][-1]) != s.snapshot["step"]):
+                raise ValueError(f"{where}: the snapshot says step {s.snapshot['step']:,} of {s.snapshot['steps']:,}, "
+                                 f"its logs end at {int(s.progress['step'][-1]):,} and the budget is {spec.steps:,}")
+            if not s.snapshot and s.evals and int(s.evals["step"][-1]) < spec.steps:  # (whole iterations may pass it)
                 raise ValueError(f"{where}: the last evaluation is at step {int(s.evals['step'][-1])}, "
-                                 f"not {spec.steps}: the run did not finish")
+                                 f"before {spec.steps}: the run did not finish")
             if s.evals and "eval_episodes" in config and any(int(e) != config["eval_episodes"]
                                                              for e in s.evals["episodes"]):
                 raise ValueError(f"{where}: an evaluation has other than {config['eval_episodes']} episodes")

@@ -14,13 +14,14 @@ from typing import Any
 import numpy as np
 
 from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, get_experiment, run_paths
-from rlcore.experiments.runner import _train_all, config_class
+from rlcore.experiments.runner import SNAPSHOT, _train_all, config_class
 from rlcore.logger import read_csv
 
 
 @dataclass
 class SeedResult:
-    """One finished seed: its logs, its config and metadata, and (loaded on first use) its policy."""
+    """One finished seed: its logs, its config and metadata, and (loaded on first use) its policy; or, with
+    ``snapshot`` set, a seed still training: its logs so far (:func:`rlcore.experiments.runner.snapshot_one`)."""
 
     seed: int
     folder: Path
@@ -28,6 +29,8 @@ class SeedResult:
     evals: dict[str, np.ndarray]
     config: dict[str, Any]
     meta: dict[str, Any]
+    snapshot: dict[str, Any] | None = None
+    """For a seed still training: the step its logs reach, its budget, and who took the snapshot when."""
     _policy: Any = field(default=None, repr=False)
 
     @property
@@ -53,12 +56,15 @@ class SeedResult:
 
 @dataclass
 class RunResults:
-    """The seeds of one configuration: from ``results/``, or from a short live stand-in (``source="live"``)."""
+    """The seeds of one configuration: from ``results/``, or from a short live stand-in (``source="live"``).
+
+    ``in_progress`` holds the snapshots of missing seeds that are still training (each is also in ``missing``)."""
 
     spec: RunSpec
     seeds: list[SeedResult]
     missing: list[int]
     source: str = "results"
+    in_progress: list[SeedResult] = field(default_factory=list)
 
     @property
     def name(self) -> str:
@@ -74,19 +80,25 @@ class RunResults:
         return self.spec.steps
 
 
+def _read_seed(seed: int, folder: Path, snapshot: dict[str, Any] | None = None) -> SeedResult:
+    return SeedResult(
+        seed, folder, read_csv(folder / "progress.csv"),
+        read_csv(folder / "eval.csv") if (folder / "eval.csv").exists() else {},
+        json.loads((folder / "config.json").read_text()), json.loads((folder / "meta.json").read_text()), snapshot,
+    )
+
+
 def _read_run(name: str, spec: RunSpec, results: Path) -> RunResults:
-    found, missing = [], []
+    found, missing, in_progress = [], [], []
     for s in spec.seeds:
         _, folder = run_paths(name, spec.name, s, results)
-        if not (folder / "policy.pt").exists():
-            missing.append(s)
+        if (folder / "policy.pt").exists():
+            found.append(_read_seed(s, folder))
             continue
-        found.append(SeedResult(
-            s, folder, read_csv(folder / "progress.csv"),
-            read_csv(folder / "eval.csv") if (folder / "eval.csv").exists() else {},
-            json.loads((folder / "config.json").read_text()), json.loads((folder / "meta.json").read_text()),
-        ))
-    return RunResults(spec, found, missing)
+        missing.append(s)
+        if (folder / SNAPSHOT).exists():
+            in_progress.append(_read_seed(s, folder, json.loads((folder / SNAPSHOT).read_text())))
+    return RunResults(spec, found, missing, in_progress=in_progress)
 
 
 def load_experiment(name: str, results: Path = RESULTS_DIR) -> dict[str, RunResults]:
@@ -161,6 +173,35 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
     return text
 
 
+def snapshot_markdown(name: str, run: RunResults) -> str:
+    """What a page says of the seeds of ``run`` that are still training (``run.in_progress``): how far each has
+    come and its last evaluation (visible), and who trained it and took the snapshot (folded)."""
+    lines, prov = [], []
+    for s in run.in_progress:
+        snap = s.snapshot
+        last = (f"; its last evaluation, at step {int(s.evals['step'][-1]):,}, returns "
+                f"{float(s.evals['mean_return'][-1]):,.0f} (mean over {int(s.evals['episodes'][-1])} episodes of the "
+                "deterministic policy)" if s.evals else "; it has not been evaluated yet")
+        lines.append(f"Seed {s.seed} is still training: `results/{name}/{run.name}/seed-{s.seed}/` holds a "
+                     f"snapshot of its logs at step {snap['step']:,} of {snap['steps']:,} "
+                     f"({100 * snap['step'] / snap['steps']:.0f}%, taken {snap['provenance']['started'][:10]}){last}.")
+        trained = [(s.meta.get("started", "?")[:10], s.meta.get("commit") or "unknown", 0)] + [
+            (r.get("started", "?")[:10], r.get("commit") or "unknown", r["step"]) for r in s.meta.get("resumes", [])]
+        v = s.meta.get("versions", {})
+        prov.append(f"Seed {s.seed}: `{s.meta.get('command')}`, started at commit {commit_text(trained[0][1])} "
+                    f"on {trained[0][0]}"
+                    + "".join(f", resumed at step {step:,} at commit {commit_text(c)} on {day}"
+                              for day, c, step in trained[1:])
+                    + f" (PyTorch {v.get('torch')}, Gymnasium {v.get('gymnasium')}, "
+                    f"{s.meta.get('machine', {}).get('torch_threads', '?')} torch thread(s)); snapshot by "
+                    f"`{snap['provenance']['command']}` at commit "
+                    f"{commit_text(snap['provenance'].get('commit') or 'unknown')}.")
+    if not lines:
+        return ""
+    return ("\n\n".join(lines) + f"\n\n::::{{dropdown}} Provenance: {run.label}, in training\n"
+            + " ".join(prov) + "\n::::\n")
+
+
 def commit_text(commit: str) -> str:
     """A recorded commit as provenance prints it: its short hash, and whether the checkout had uncommitted changes."""
     return commit[:7] + (" (with uncommitted changes)" if commit.endswith("+dirty") else "")
@@ -207,4 +248,7 @@ def status_lines(name: str, results: Path = RESULTS_DIR, work: Path = WORK_DIR) 
             if (folder / "checkpoint.pt").exists() and len(progress.get("step", [])):
                 lines.append(f"  seed {seed}: trained to step {int(progress['step'][-1]):,} of {res.spec.steps:,} in "
                              f"{folder}; `experiments run` resumes it from its last checkpoint")
+        for snap in res.in_progress:
+            lines.append(f"  seed {snap.seed}: {snap.folder} holds a snapshot of its logs at step "
+                         f"{snap.snapshot['step']:,} (taken {snap.snapshot['provenance']['started']})")
     return lines

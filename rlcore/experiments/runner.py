@@ -4,6 +4,7 @@ outputs copied to ``results/`` when a seed finishes.
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import shutil
@@ -67,12 +68,57 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, w
         module = get_algorithm(spec.algo)
         config = module.make_config(spec.algo, **spec.overrides)
         module.train(spec.env_id, config, steps=spec.steps, seed=seed, out=work_dir, progress=False)
+    copy_logs(work_dir, result_dir)
+    export_policy(work_dir / "checkpoint.pt", result_dir / "policy.pt")
+    (result_dir / SNAPSHOT).unlink(missing_ok=True)  # the finished seed replaces its in-progress snapshot
+    return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
+
+
+LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv")
+"""What a seed's results folder holds besides ``policy.pt``: settings, provenance and the two logs."""
+
+SNAPSHOT = "snapshot.json"
+"""In a results folder without ``policy.pt``: the seed is still training, and these are its logs so far."""
+
+
+def copy_logs(work_dir: Path, result_dir: Path) -> None:
+    """Copy a run's small files (:data:`LOGS`) from its work folder to its results folder."""
     result_dir.mkdir(parents=True, exist_ok=True)
-    for name in ("config.json", "meta.json", "progress.csv", "eval.csv"):
+    for name in LOGS:
         if (work_dir / name).exists():
             shutil.copy2(work_dir / name, result_dir / name)
-    export_policy(work_dir / "checkpoint.pt", result_dir / "policy.pt")
-    return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
+
+
+def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:
+    """Copy the logs of a seed that is still training to ``results`` with a :data:`SNAPSHOT` record, so that a
+    page can show how far a run of many sessions has come; returns a status line.
+
+    A snapshot holds no policy: the seed still counts as missing, and when it finishes :func:`train_one` writes
+    its final files over the snapshot and removes the record. Taking one while the seed trains is safe: the
+    logs only grow, and their rows up to any step are what the resumed run writes again.
+    """
+    from rlcore.logger import read_csv
+    from rlcore.runs import run_metadata
+
+    work_dir, result_dir = run_paths(exp, spec.name, seed, results, work)
+    where = f"{exp}/{spec.name}/seed-{seed}"
+    if (result_dir / "policy.pt").exists():
+        return f"{where}: finished, already in {result_dir}"
+    progress = read_csv(work_dir / "progress.csv") if (work_dir / "progress.csv").exists() else {}
+    if not len(progress.get("step", [])):
+        return f"{where}: nothing to snapshot, no training episode in {work_dir} yet"
+    copy_logs(work_dir, result_dir)
+    step = int(progress["step"][-1])
+    record = {"step": step, "steps": spec.steps, "provenance": run_metadata()}
+    (result_dir / SNAPSHOT).write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
+    return f"{where}: snapshot at step {step:,} of {spec.steps:,} -> {result_dir}"
+
+
+def snapshot_experiment(name: str, only: list[str] | None = None, seeds: list[int] | None = None,
+                        results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
+    """:func:`snapshot_one` for every chosen seed of an experiment."""
+    return [snapshot_one(name, spec, s, results, work) for spec in chosen_runs(name, only)
+            for s in spec.seeds if seeds is None or s in seeds]
 
 
 def _train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: Path, work: Path,
