@@ -20,15 +20,16 @@ episodes of ``--episode-length`` steps. Writes
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import provenance, write_record  # noqa: E402
 
 OBS_DIM, ACT_DIM = 348, 17           # Humanoid-v5
 
@@ -120,27 +121,6 @@ def main() -> None:
                      f"{args.episode_length}"),
     }
     write_record(record, args.out)
-
-
-def provenance(command: str) -> dict[str, object]:
-    """What a record needs beside its numbers: the command, versions, machine (with torch's thread count) and
-    commit."""
-    import rlcore
-    from rlcore.runs import git_commit
-
-    return {"command": command,
-            "versions": {"rlcore": rlcore.__version__, "torch": torch.__version__, "numpy": np.__version__,
-                         "python": platform.python_version()},
-            "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(),
-                        "torch_threads": torch.get_num_threads()},
-            "commit": git_commit()}
-
-
-def write_record(record: dict[str, object], out: str | os.PathLike) -> None:
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(record, indent=2) + "\n")
-    print(f"-> {out}")
 
 
 if __name__ == "__main__":

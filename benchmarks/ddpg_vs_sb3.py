@@ -37,14 +37,15 @@ target-policy noise and takes a minimum over its one critic; rlcore starts learn
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
-import statistics
 import time
+import sys
 from pathlib import Path
 
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import provenance, throughput, throughput_summary, time_side_by_side, write_record  # noqa: E402
 
 
 def rlcore_ddpg(env_id: str, steps: int, seed: int, cfg: dict) -> float:
@@ -161,26 +162,11 @@ def main() -> None:
         raise SystemExit("rlcore.ddpg.Config's defaults changed: SB3 cannot express them (see this script's docstring)")
     cfg = {k: getattr(d, k) for k in ("hidden", "actor_lr", "critic_lr", "gamma", "tau", "buffer_size", "batch_size",
                                        "learning_starts", "exploration", "noise_sigma", "explore_decay", "reward_scale")}
-    times: dict[str, list[float]] = {"rlcore": [], "sb3": []}
-    for r in range(args.repeats):
-        for name, fn in (("rlcore", rlcore_ddpg), ("sb3", sb3_ddpg)):
-            t = fn(args.env, args.steps, args.seed + r, cfg)
-            times[name].append(t)
-            print(f"repeat {r + 1}/{args.repeats}  {name:6s}  {args.steps / t:8.0f} env-steps/s  ({t:.1f} s)  "
-                  f"load {os.getloadavg()[0]:.2f}", flush=True)
+    times = time_side_by_side({"rlcore": rlcore_ddpg, "sb3": sb3_ddpg}, args.env, args.steps, args.seed,
+                              args.repeats, cfg)
     profile = where_the_time_goes(args.env, args.steps, args.seed, cfg)
     print(f"where rlcore's time goes: networks {profile['share_networks']:.0%}, simulator "
           f"{profile['share_simulator']:.0%}, the rest {profile['share_rest']:.0%}", flush=True)
-    load_end = os.getloadavg()
-    sps = {k: args.steps / statistics.median(v) for k, v in times.items()}
-    ratio = sps["rlcore"] / sps["sb3"]
-
-    import gymnasium
-    import mujoco
-
-    import rlcore
-    from rlcore.runs import git_commit
-
     command = f"python benchmarks/ddpg_vs_sb3.py --env {args.env} --steps {args.steps}"
     if args.learning_starts is not None:
         command += f" --learning-starts {args.learning_starts}"
@@ -188,20 +174,10 @@ def main() -> None:
         "benchmark": "ddpg-vs-sb3", "env_id": args.env, "steps": args.steps, "repeats": args.repeats,
         "hyperparameters": {**{k: list(v) if isinstance(v, tuple) else v for k, v in cfg.items()},
                             "train_freq": 1, "gradient_steps": 1},
-        "seconds": times, "env_steps_per_second_per_repeat": {k: [args.steps / t for t in v] for k, v in times.items()},
-        "env_steps_per_second": sps, "ratio_rlcore_over_sb3": ratio, "rlcore_time_shares": profile,
-        "command": f"{command} --repeats {args.repeats}",
-        "versions": {"rlcore": rlcore.__version__, "stable_baselines3": stable_baselines3.__version__,
-                     "torch": torch.__version__, "gymnasium": gymnasium.__version__, "mujoco": mujoco.__version__,
-                     "python": platform.python_version()},
-        "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                    "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(),
-                    "loadavg_start": list(load_start), "loadavg_end": list(load_end)},
-        "commit": git_commit(),
+        **throughput(times, args.steps), "rlcore_time_shares": profile,
+        **provenance(f"{command} --repeats {args.repeats}", load_start, peers=("stable_baselines3",)),
     }
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
-    print(f"rlcore {sps['rlcore']:.0f} env-steps/s, SB3 {sps['sb3']:.0f} env-steps/s: ratio {ratio:.2f}x  -> {args.out}")
+    write_record(record, args.out, throughput_summary(record))
 
 
 if __name__ == "__main__":

@@ -12,14 +12,15 @@ environment steps per second of training wall time; the verdict is the ratio of 
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
-import statistics
 import time
+import sys
 from pathlib import Path
 
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import provenance, throughput, throughput_summary, time_side_by_side, write_record  # noqa: E402
 
 
 def rlcore_dqn(env_id: str, steps: int, seed: int, cfg: dict) -> float:
@@ -69,36 +70,16 @@ def main() -> None:
 
     warm_up(args.env)
     load_start = os.getloadavg()
-    times: dict[str, list[float]] = {"rlcore": [], "sb3": []}
-    for r in range(args.repeats):
-        for name, fn in (("rlcore", rlcore_dqn), ("sb3", sb3_dqn)):
-            t = fn(args.env, args.steps, args.seed + r, cfg)
-            times[name].append(t)
-            print(f"repeat {r + 1}/{args.repeats}  {name:6s}  {args.steps / t:8.0f} env-steps/s  ({t:.1f} s)", flush=True)
-    sps = {k: args.steps / statistics.median(v) for k, v in times.items()}
-    ratio = sps["rlcore"] / sps["sb3"]
-
-    import gymnasium
-    import stable_baselines3
-
-    import rlcore
-    from rlcore.runs import git_commit
-
+    times = time_side_by_side({"rlcore": rlcore_dqn, "sb3": sb3_dqn}, args.env, args.steps, args.seed,
+                              args.repeats, cfg)
     record = {
         "benchmark": "dqn-vs-sb3", "env_id": args.env, "steps": args.steps, "repeats": args.repeats,
         "hyperparameters": {k: list(v) if isinstance(v, tuple) else v for k, v in cfg.items()},
-        "seconds": times, "env_steps_per_second": sps, "ratio_rlcore_over_sb3": ratio,
-        "command": f"python benchmarks/dqn_vs_sb3.py --env {args.env} --steps {args.steps} --repeats {args.repeats}",
-        "versions": {"rlcore": rlcore.__version__, "stable_baselines3": stable_baselines3.__version__,
-                     "torch": torch.__version__, "gymnasium": gymnasium.__version__, "python": platform.python_version()},
-        "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                    "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(),
-                    "loadavg_start": list(load_start), "loadavg_end": list(os.getloadavg())},
-        "commit": git_commit(),
+        **throughput(times, args.steps),
+        **provenance(f"python benchmarks/dqn_vs_sb3.py --env {args.env} --steps {args.steps} --repeats {args.repeats}",
+                     load_start, peers=("stable_baselines3",)),
     }
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
-    print(f"rlcore {sps['rlcore']:.0f} env-steps/s, SB3 {sps['sb3']:.0f} env-steps/s: ratio {ratio:.2f}x  -> {args.out}")
+    write_record(record, args.out, throughput_summary(record))
 
 
 if __name__ == "__main__":

@@ -23,7 +23,8 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from checkpoint_cost import learning_step_seconds, provenance, write_record  # noqa: E402
+from checkpoint_cost import learning_step_seconds  # noqa: E402
+from record import provenance, write_record  # noqa: E402
 
 REFERENCE = ("ddpg-modern-1m", "humanoid")
 SETTINGS = (("ddpg-report-humanoid", "small"), ("ddpg-report-humanoid", "large"), REFERENCE)
@@ -73,9 +74,8 @@ def main() -> None:
         "benchmark": "humanoid-cost", "env_id": "Humanoid-v5", "repeats": args.repeats, "steps": args.steps,
         "reference": "/".join(REFERENCE), "rows": rows,
         **provenance(f"python benchmarks/humanoid_cost.py --repeats {args.repeats} --steps {args.steps}"
-                     + (f" --threads {args.threads}" if args.threads != 1 else "")),
+                     + (f" --threads {args.threads}" if args.threads != 1 else ""), load_start),
     }
-    record["machine"] |= {"loadavg_start": list(load_start), "loadavg_end": list(os.getloadavg())}
     for row in rows:
         print(f"{row['experiment']}/{row['run']}: {1e3 * row['seconds_per_learning_step']:.1f} ms "
               f"({row['ratio_to_modern']:.1f}x the modern settings), {row['core_hours_to_1m']:.1f} core-hours to 1M "

@@ -33,14 +33,15 @@ minibatches of 64: the same arithmetic per epoch, about 3% fewer optimizer steps
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
-import statistics
 import time
+import sys
 from pathlib import Path
 
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import provenance, throughput, throughput_summary, time_side_by_side, write_record  # noqa: E402
 
 
 def rlcore_ppo(env_id: str, steps: int, seed: int, cfg: dict) -> float:
@@ -120,40 +121,16 @@ def main() -> None:
                                        "gamma", "gae_lambda", "clip_range", "normalize_advantage", "normalize_obs",
                                        "normalize_reward", "ent_coef", "vf_coef", "max_grad_norm", "hidden",
                                        "activation", "ortho_init", "log_std_init")}
-    times: dict[str, list[float]] = {"rlcore": [], "sb3": []}
-    for r in range(args.repeats):
-        for name, fn in (("rlcore", rlcore_ppo), ("sb3", sb3_ppo)):
-            t = fn(args.env, args.steps, args.seed + r, cfg)
-            times[name].append(t)
-            print(f"repeat {r + 1}/{args.repeats}  {name:6s}  {args.steps / t:8.0f} env-steps/s  ({t:.1f} s)  "
-                  f"load {os.getloadavg()[0]:.2f}", flush=True)
-    load_end = os.getloadavg()
-    sps = {k: args.steps / statistics.median(v) for k, v in times.items()}
-    ratio = sps["rlcore"] / sps["sb3"]
-
-    import gymnasium
-    import mujoco
-
-    import rlcore
-    from rlcore.runs import git_commit
-
+    times = time_side_by_side({"rlcore": rlcore_ppo, "sb3": sb3_ppo}, args.env, args.steps, args.seed,
+                              args.repeats, cfg)
     record = {
         "benchmark": "ppo-vs-sb3", "env_id": args.env, "steps": args.steps, "repeats": args.repeats,
         "hyperparameters": {k: list(v) if isinstance(v, tuple) else v for k, v in cfg.items()},
-        "seconds": times, "env_steps_per_second_per_repeat": {k: [args.steps / t for t in v] for k, v in times.items()},
-        "env_steps_per_second": sps, "ratio_rlcore_over_sb3": ratio, "target_ratio": 1.5,
-        "command": f"python benchmarks/ppo_vs_sb3.py --env {args.env} --steps {args.steps} --repeats {args.repeats}",
-        "versions": {"rlcore": rlcore.__version__, "stable_baselines3": stable_baselines3.__version__,
-                     "torch": torch.__version__, "gymnasium": gymnasium.__version__, "mujoco": mujoco.__version__,
-                     "python": platform.python_version()},
-        "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                    "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(),
-                    "loadavg_start": list(load_start), "loadavg_end": list(load_end)},
-        "commit": git_commit(),
+        **throughput(times, args.steps), "target_ratio": 1.5,
+        **provenance(f"python benchmarks/ppo_vs_sb3.py --env {args.env} --steps {args.steps} --repeats {args.repeats}",
+                     load_start, peers=("stable_baselines3",)),
     }
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
-    print(f"rlcore {sps['rlcore']:.0f} env-steps/s, SB3 {sps['sb3']:.0f} env-steps/s: ratio {ratio:.2f}x  -> {args.out}")
+    write_record(record, args.out, throughput_summary(record))
 
 
 if __name__ == "__main__":
