@@ -20,13 +20,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
+import sys
 from pathlib import Path
 
 import numpy as np
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import provenance, write_record  # noqa: E402
 
 EVAL_EVERY, EVAL_EPISODES, FINAL_EPISODES = 20_000, 5, 10
 
@@ -102,10 +104,6 @@ def main() -> None:
     args = p.parse_args()
     torch.set_num_threads(1)
 
-    import gymnasium
-    import stable_baselines3
-
-    import rlcore
     from rlcore.experiments.peers import peer_path
     from rlcore.runs import git_commit
 
@@ -122,10 +120,8 @@ def main() -> None:
         "normalization": "SB3 VecNormalize(norm_obs, norm_reward, clip 10, gamma = the algorithm's)",
         "evaluation": f"deterministic, every {EVAL_EVERY:,} steps on {EVAL_EPISODES} episodes (reset seeds "
                       f"seed + 10000 + i); at the end {FINAL_EPISODES} episodes (seed + 20000 + i)",
-        "command": f"python benchmarks/ppo_returns_vs_sb3.py --env {args.env} --seeds {args.seeds}",
-        "versions": {"rlcore": rlcore.__version__, "stable_baselines3": stable_baselines3.__version__,
-                     "torch": torch.__version__, "gymnasium": gymnasium.__version__, "python": platform.python_version()},
-        "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(), "torch_threads": 1},
+        **provenance(f"python benchmarks/ppo_returns_vs_sb3.py --env {args.env} --seeds {args.seeds}",
+                     peers=("stable_baselines3",)),
     })
     done = {r["seed"] for r in record["seeds"]}
     for seed in (int(s) for s in args.seeds.split(",")):
@@ -135,10 +131,8 @@ def main() -> None:
         print(f"seed {seed}: training SB3 PPO on {args.env} for {steps:,} steps", flush=True)
         result = train_seed(args.env, seed, settings, steps)
         record["seeds"] = sorted([*record["seeds"], {**result, "commit": git_commit()}], key=lambda r: r["seed"])
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(record, indent=2) + "\n")
-        print(f"seed {seed}: final {np.mean(result['final_returns']):,.0f} over {FINAL_EPISODES} episodes "
-              f"({result['seconds'] / 60:.0f} min) -> {out}", flush=True)
+        write_record(record, out, f"seed {seed}: final {np.mean(result['final_returns']):,.0f} over "
+                                  f"{FINAL_EPISODES} episodes ({result['seconds'] / 60:.0f} min)")
 
 
 if __name__ == "__main__":

@@ -40,7 +40,8 @@ def test_side_by_side_interleaves_the_runners_and_reports_the_median(script_modu
         f"rlcore 50 env-steps/s, SB3 12 env-steps/s: ratio 4.00x  -> {out}")
 
 
-@pytest.mark.parametrize("script", ["ddpg_vs_sb3", "ppo_vs_sb3", "dqn_vs_sb3", "checkpoint_cost", "humanoid_cost"])
+@pytest.mark.parametrize("script", ["ddpg_vs_sb3", "ppo_vs_sb3", "dqn_vs_sb3", "ppo_returns_vs_sb3",
+                                    "checkpoint_cost", "humanoid_cost"])
 def test_every_benchmark_writes_through_the_shared_record(script):
     from pathlib import Path
 
