@@ -105,7 +105,7 @@ def cmd_experiments(args: argparse.Namespace) -> int:
         return 0
     if args.action == "snapshot":
         for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
-                                           work=Path(args.work)):
+                                           work=Path(args.work), policy=args.policy):
             print(line)
         return 0
     if args.action == "run":
@@ -164,6 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
     x.add_argument("--seeds", type=seed_list, help="comma-separated subset of the seeds, e.g. 0,1")
     x.add_argument("--episodes", type=count(1), default=5, help="reevaluate: episodes per seed")
+    x.add_argument("--policy", action="store_true",
+                   help="snapshot: also the policy of each seed's last checkpoint (snapshot-policy.pt)")
     x.add_argument("--results", default=str(RESULTS_DIR), help="where finished runs' small outputs go")
     x.add_argument("--work", default=str(WORK_DIR), help="where runs train and keep full checkpoints")
     x.set_defaults(func=cmd_experiments)

@@ -192,11 +192,26 @@ def test_snapshot_shows_a_seed_in_training_until_it_finishes(tiny, tmp_path):
     assert snap.snapshot["step"] == last and snap.snapshot["steps"] == 600
     assert snap.evals["step"].tolist() == [300, 600] and snap.config["config"]["hidden"] == [16]
     assert f"holds a snapshot of its logs at step {last:,}" in ex.status_lines("tiny", results, work)[-1]
+    assert ex.snapshot_one("tiny", spec, 0, results, tmp_path / "elsewhere", policy=True) == (
+        f"tiny/dqn/seed-0: nothing to snapshot, no training episode in {tmp_path / 'elsewhere' / 'tiny' / 'dqn' / 'seed-0'} yet")
     text = ex.snapshot_markdown("tiny", run)
     assert text.startswith(f"Seed 0 is still training: `results/tiny/dqn/seed-0/` holds a snapshot of its logs at "
                            f"step {last:,} of 600")
     assert "its last evaluation, at step 600, returns" in text and "::::{dropdown} Provenance: dqn, in training" in text
     ex.check_results("tiny", ex.load_experiment("tiny", results))
+    assert not (result_dir / ex.SNAPSHOT_POLICY).exists()   # logs only, unless asked for
+    # with --policy, the policy of the last checkpoint too: what the seed does part of the way
+    assert ex.snapshot_one("tiny", spec, 0, results, work, policy=True).endswith(
+        f"snapshot at step {last:,} of 600, policy at step 600 -> {result_dir}")
+    snap = ex.load_experiment("tiny", results)["dqn"].in_progress[0]
+    assert snap.snapshot["policy_step"] == 600 and snap.policy_path == result_dir / ex.SNAPSHOT_POLICY
+    assert "replay" not in load_checkpoint(snap.policy_path)
+    assert "It holds the policy of its checkpoint at step 600 too" in ex.snapshot_markdown(
+        "tiny", ex.load_experiment("tiny", results)["dqn"])
+    evaluate_policy(snap.policy, make_env("CartPole-v1"), episodes=1)
+    ex.snapshot_one("tiny", spec, 0, results, work)    # a later snapshot of the logs alone drops the older policy
+    assert not (result_dir / ex.SNAPSHOT_POLICY).exists()
+    ex.snapshot_one("tiny", spec, 0, results, work, policy=True)
     record = json.loads((result_dir / ex.SNAPSHOT).read_text())
     (result_dir / ex.SNAPSHOT).write_text(json.dumps({**record, "steps": 900}))
     with pytest.raises(ValueError, match="snapshot says step"):

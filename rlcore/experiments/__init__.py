@@ -61,6 +61,7 @@ from rlcore.experiments.runner import (  # noqa: F401
     snapshot_one,
     snapshot_experiment,
     SNAPSHOT,
+    SNAPSHOT_POLICY,
     run_in_pool,
     schedule,
     run_experiment,

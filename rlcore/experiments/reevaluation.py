@@ -38,8 +38,8 @@ STORE = "RLCORE_STORE_REEVALUATIONS"
 """Set to 1, :func:`stored` writes what it computes (``RLCORE_STORE_REEVALUATIONS=1 jupyter-book build .``)."""
 
 
-def _policy_sha256(folder: Path) -> str:
-    return hashlib.sha256((folder / "policy.pt").read_bytes()).hexdigest()
+def _policy_sha256(s: SeedResult) -> str:
+    return hashlib.sha256(s.policy_path.read_bytes()).hexdigest()
 
 
 def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[], dict[str, Any]],
@@ -51,7 +51,7 @@ def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[
     from rlcore.runs import run_metadata
 
     path = s.folder / f"{name}.json"
-    sha = _policy_sha256(s.folder)
+    sha = _policy_sha256(s)
     records = json.loads(path.read_text())["records"] if path.exists() else []
     for record in records:
         if record["params"] == params and record["policy_sha256"] == sha:

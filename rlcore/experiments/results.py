@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, get_experiment, run_paths
-from rlcore.experiments.runner import SNAPSHOT, _train_all, config_class
+from rlcore.experiments.runner import SNAPSHOT, SNAPSHOT_POLICY, _train_all, config_class
 from rlcore.logger import read_csv
 
 
@@ -43,13 +43,19 @@ class SeedResult:
         return self.progress["episode_return"]
 
     @property
+    def policy_path(self) -> Path:
+        """``policy.pt``; for a snapshot, the policy of the run's checkpoint at ``snapshot["policy_step"]``
+        (``snapshot-policy.pt``, written by ``experiments snapshot --policy``)."""
+        return self.folder / (SNAPSHOT_POLICY if self.snapshot else "policy.pt")
+
+    @property
     def policy(self):
-        """The final deterministic policy, from ``policy.pt``."""
+        """The final deterministic policy, from ``policy.pt`` (a snapshot's policy so far: :attr:`policy_path`)."""
         if self._policy is None:
             from rlcore.algos import get_algorithm
             from rlcore.checkpoint import load_checkpoint
 
-            ckpt = load_checkpoint(self.folder / "policy.pt")
+            ckpt = load_checkpoint(self.policy_path)
             self._policy = get_algorithm(ckpt["algo"]).load_policy(ckpt)
         return self._policy
 
@@ -184,7 +190,9 @@ def snapshot_markdown(name: str, run: RunResults) -> str:
                 "deterministic policy)" if s.evals else "; it has not been evaluated yet")
         lines.append(f"Seed {s.seed} is still training: `results/{name}/{run.name}/seed-{s.seed}/` holds a "
                      f"snapshot of its logs at step {snap['step']:,} of {snap['steps']:,} "
-                     f"({100 * snap['step'] / snap['steps']:.0f}%, taken {snap['provenance']['started'][:10]}){last}.")
+                     f"({100 * snap['step'] / snap['steps']:.0f}%, taken {snap['provenance']['started'][:10]}){last}."
+                     + (f" It holds the policy of its checkpoint at step {snap['policy_step']:,} too "
+                        f"(`{SNAPSHOT_POLICY}`)." if "policy_step" in snap else ""))
         trained = [(s.meta.get("started", "?")[:10], s.meta.get("commit") or "unknown", 0)] + [
             (r.get("started", "?")[:10], r.get("commit") or "unknown", r["step"]) for r in s.meta.get("resumes", [])]
         v = s.meta.get("versions", {})

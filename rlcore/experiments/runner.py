@@ -18,14 +18,16 @@ from typing import Any
 from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, _META_KEYS, get_experiment, run_paths
 
 
-def export_policy(checkpoint: str | os.PathLike, dest: str | os.PathLike) -> None:
-    """Write only what :func:`load_policy` needs from ``checkpoint`` (no replay memory, no optimizer)."""
+def export_policy(checkpoint: str | os.PathLike, dest: str | os.PathLike) -> int:
+    """Write only what :func:`load_policy` needs from ``checkpoint`` (no replay memory, no optimizer); returns the
+    step the checkpoint was written at."""
     from rlcore.algos import get_algorithm
     from rlcore.checkpoint import load_checkpoint, save_checkpoint
 
     ckpt = load_checkpoint(checkpoint)
     keys = (*_META_KEYS, *get_algorithm(ckpt["algo"]).POLICY_KEYS)
     save_checkpoint(dest, {k: ckpt[k] for k in keys if k in ckpt and k not in ("format", "format_version")})
+    return int(ckpt["step"])
 
 
 def config_class(algo: str) -> type:
@@ -70,7 +72,8 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, w
         module.train(spec.env_id, config, steps=spec.steps, seed=seed, out=work_dir, progress=False)
     copy_logs(work_dir, result_dir)
     export_policy(work_dir / "checkpoint.pt", result_dir / "policy.pt")
-    (result_dir / SNAPSHOT).unlink(missing_ok=True)  # the finished seed replaces its in-progress snapshot
+    for name in (SNAPSHOT, SNAPSHOT_POLICY):  # the finished seed replaces its in-progress snapshot
+        (result_dir / name).unlink(missing_ok=True)
     return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
 
 
@@ -79,6 +82,9 @@ LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv")
 
 SNAPSHOT = "snapshot.json"
 """In a results folder without ``policy.pt``: the seed is still training, and these are its logs so far."""
+
+SNAPSHOT_POLICY = "snapshot-policy.pt"
+"""Beside a :data:`SNAPSHOT`, where it was asked for: the policy of the seed's last checkpoint."""
 
 
 def copy_logs(work_dir: Path, result_dir: Path) -> None:
@@ -89,9 +95,12 @@ def copy_logs(work_dir: Path, result_dir: Path) -> None:
             shutil.copy2(work_dir / name, result_dir / name)
 
 
-def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:
+def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR,
+                 policy: bool = False) -> str:
     """Copy the logs of a seed that is still training to ``results`` with a :data:`SNAPSHOT` record, so that a
-    page can show how far a run of many sessions has come; returns a status line.
+    page can show how far a run of many sessions has come; returns a status line. With ``policy``, also the policy
+    of its last checkpoint (:data:`SNAPSHOT_POLICY`, its step in the record as ``policy_step``): what the policy
+    does part of the way, e.g. at 1M steps of a longer budget.
 
     A snapshot holds no policy: the seed still counts as missing, and when it finishes :func:`train_one` writes
     its final files over the snapshot and removes the record. Taking one while the seed trains is safe: the
@@ -107,17 +116,24 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR
     progress = read_csv(work_dir / "progress.csv") if (work_dir / "progress.csv").exists() else {}
     if not len(progress.get("step", [])):
         return f"{where}: nothing to snapshot, no training episode in {work_dir} yet"
+    if policy and not (work_dir / "checkpoint.pt").exists():
+        return f"{where}: no checkpoint in {work_dir} yet to take a policy from; run it again without --policy"
     copy_logs(work_dir, result_dir)
     step = int(progress["step"][-1])
     record = {"step": step, "steps": spec.steps, "provenance": run_metadata()}
+    if policy:
+        record["policy_step"] = export_policy(work_dir / "checkpoint.pt", result_dir / SNAPSHOT_POLICY)
+    else:  # a policy from an earlier snapshot would not match these logs
+        (result_dir / SNAPSHOT_POLICY).unlink(missing_ok=True)
     (result_dir / SNAPSHOT).write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
-    return f"{where}: snapshot at step {step:,} of {spec.steps:,} -> {result_dir}"
+    return (f"{where}: snapshot at step {step:,} of {spec.steps:,}"
+            + (f", policy at step {record['policy_step']:,}" if policy else "") + f" -> {result_dir}")
 
 
 def snapshot_experiment(name: str, only: list[str] | None = None, seeds: list[int] | None = None,
-                        results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
+                        results: Path = RESULTS_DIR, work: Path = WORK_DIR, policy: bool = False) -> list[str]:
     """:func:`snapshot_one` for every chosen seed of an experiment."""
-    return [snapshot_one(name, spec, s, results, work) for spec in chosen_runs(name, only)
+    return [snapshot_one(name, spec, s, results, work, policy) for spec in chosen_runs(name, only)
             for s in spec.seeds if seeds is None or s in seeds]
 
 
