@@ -158,7 +158,8 @@ def build_parser() -> argparse.ArgumentParser:
     x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
     x.add_argument("action", choices=["list", "run", "status", "reevaluate", "snapshot"],
                    help="reevaluate: evaluate each finished seed's final policy and store its returns in results/; "
-                        "snapshot: copy the logs so far of seeds still training to results/ (no policy)")
+                        "snapshot: copy the logs so far of seeds still training to results/ (with --policy, the "
+                        "policy of their last checkpoint too)")
     x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
     x.add_argument("--jobs", type=count(1), default=1, help="runs in parallel, one process each (one per core)")
     x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")

@@ -195,7 +195,8 @@ def test_snapshot_shows_a_seed_in_training_until_it_finishes(tiny, tmp_path):
     assert ex.snapshot_one("tiny", spec, 0, results, tmp_path / "elsewhere", policy=True) == (
         f"tiny/dqn/seed-0: nothing to snapshot, no training episode in {tmp_path / 'elsewhere' / 'tiny' / 'dqn' / 'seed-0'} yet")
     text = ex.snapshot_markdown("tiny", run)
-    assert text.startswith(f"Seed 0 is still training: `results/tiny/dqn/seed-0/` holds a snapshot of its logs at "
+    assert text.startswith(f"Seed 0 had not finished when its snapshot was taken: `results/tiny/dqn/seed-0/` "
+                           f"holds a snapshot of its logs at "
                            f"step {last:,} of 600")
     assert "its last evaluation, at step 600, returns" in text and "::::{dropdown} Provenance: dqn, in training" in text
     ex.check_results("tiny", ex.load_experiment("tiny", results))

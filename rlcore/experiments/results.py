@@ -188,7 +188,8 @@ def snapshot_markdown(name: str, run: RunResults) -> str:
         last = (f"; its last evaluation, at step {int(s.evals['step'][-1]):,}, returns "
                 f"{float(s.evals['mean_return'][-1]):,.0f} (mean over {int(s.evals['episodes'][-1])} episodes of the "
                 "deterministic policy)" if s.evals else "; it has not been evaluated yet")
-        lines.append(f"Seed {s.seed} is still training: `results/{name}/{run.name}/seed-{s.seed}/` holds a "
+        lines.append(f"Seed {s.seed} had not finished when its snapshot was taken: "
+                     f"`results/{name}/{run.name}/seed-{s.seed}/` holds a "
                      f"snapshot of its logs at step {snap['step']:,} of {snap['steps']:,} "
                      f"({100 * snap['step'] / snap['steps']:.0f}%, taken {snap['provenance']['started'][:10]}){last}."
                      + (f" It holds the policy of its checkpoint at step {snap['policy_step']:,} too "
