@@ -16,7 +16,10 @@ One idea per module (see the design card in the README):
 - :mod:`rlcore.tabular`    tabular Q-learning and SARSA, value iteration
 - :mod:`rlcore.dqn`        DQN with Double, Dueling and Prioritized switches
 - :mod:`rlcore.a2c`        A2C, synchronous advantage actor-critic
+- :mod:`rlcore.offpolicy`  the off-policy core DDPG, TD3 and SAC share
 - :mod:`rlcore.ddpg`       DDPG
+- :mod:`rlcore.td3`        TD3: clipped double Q, target-policy smoothing, delayed updates
+- :mod:`rlcore.sac`        SAC: maximum entropy, a squashed Gaussian policy, automatic temperature
 - :mod:`rlcore.ppo`        PPO, clipped and adaptive-KL
 - :mod:`rlcore.experiments` the book's named, resumable full-budget experiments
 - :mod:`rlcore.algos`      the registry of algorithms the command line knows

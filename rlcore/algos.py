@@ -7,7 +7,7 @@ Each name maps to a module that provides:
   and saves a checkpoint on Ctrl-C;
 - ``load_policy(checkpoint) -> policy``: the deterministic policy, a callable from observation to action.
 
-Later chapters add their algorithms here (``dqn``, ``a2c``, ``ddpg``, ``ppo``).
+Later chapters add their algorithms here (``dqn``, ``a2c``, ``ddpg``, ``ppo``, ``td3``, ``sac``).
 """
 
 from __future__ import annotations
@@ -23,6 +23,8 @@ ALGORITHMS: dict[str, str] = {
     "a2c": "rlcore.a2c",
     "ppo": "rlcore.ppo",
     "ddpg": "rlcore.ddpg",
+    "td3": "rlcore.td3",
+    "sac": "rlcore.sac",
 }
 
 

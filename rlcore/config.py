@@ -29,7 +29,7 @@ RANGES: dict[str, Interval] = {
     "clip_range": POSITIVE, "max_grad_norm": POSITIVE, "reward_scale": POSITIVE, "param_noise_target": POSITIVE,
     "kl_target": POSITIVE, "kl_alpha": POSITIVE, "kl_beta_high": POSITIVE, "kl_beta_low": POSITIVE,
     "ent_coef": NON_NEGATIVE, "vf_coef": NON_NEGATIVE, "noise_sigma": NON_NEGATIVE, "explore_noise": NON_NEGATIVE,
-    "kl_coef": NON_NEGATIVE,
+    "kl_coef": NON_NEGATIVE, "exploration_noise": NON_NEGATIVE, "alpha_lr": POSITIVE,
     # probabilities, discounts and rates
     "gamma": UNIT, "gae_lambda": UNIT, "epsilon_start": UNIT, "epsilon_end": UNIT, "exploration_fraction": UNIT,
     "per_alpha": UNIT, "per_beta_start": UNIT, "rms_alpha": UNIT,
@@ -38,7 +38,7 @@ RANGES: dict[str, Interval] = {
     "batch_size": AT_LEAST_ONE, "buffer_size": AT_LEAST_ONE, "n_steps": AT_LEAST_ONE, "num_envs": AT_LEAST_ONE,
     "n_epochs": AT_LEAST_ONE, "gradient_steps": AT_LEAST_ONE, "train_freq": AT_LEAST_ONE,
     "target_update_interval": AT_LEAST_ONE, "checkpoint_every": AT_LEAST_ONE, "checkpoint_updates": AT_LEAST_ONE,
-    "eval_episodes": AT_LEAST_ONE, "log_every": AT_LEAST_ONE,
+    "eval_episodes": AT_LEAST_ONE, "log_every": AT_LEAST_ONE, "policy_delay": AT_LEAST_ONE,
     "eval_every": NON_NEGATIVE, "learning_starts": NON_NEGATIVE, "epsilon_decay_steps": NON_NEGATIVE,
 }
 """The accepted interval of every named Config field, whichever algorithm has it."""

@@ -8,6 +8,7 @@ import torch
 
 from rlcore import ddpg
 from rlcore.experiments import critic_trace
+from rlcore.offpolicy import Minibatch
 
 SMALL = dict(hidden=(32, 32), learning_starts=300, batch_size=32, buffer_size=5_000, eval_every=400,
              eval_episodes=1, normalize_obs=True)
@@ -34,8 +35,10 @@ def test_stats_are_the_update_s_own_target_and_loss():
     actor_t = ddpg.Actor(3, 1, (8,), low=[-2.0], high=[2.0])
     obs, next_obs = torch.randn(16, 3), torch.randn(16, 3)
     actions, rewards, done = torch.rand(16, 1) * 4 - 2, torch.randn(16), (torch.rand(16) < 0.3).float()
-    stats = critic_trace.critic_stats(critic, actor_t, critic_t, obs, actions, rewards, next_obs, done, 0.9)
     y = ddpg.critic_target(actor_t, critic_t, next_obs, rewards, done, 0.9)
+    mb = Minibatch(obs, actions, rewards, next_obs, done)
+    stats = critic_trace.critic_stats(critic, lambda: ddpg.critic_target(actor_t, critic_t, next_obs, rewards, done,
+                                                                         0.9), mb)
     assert stats["y_mean"] == pytest.approx(float(y.mean())) and stats["y_max"] == pytest.approx(float(y.max()))
     loss = ddpg.update_critic(critic, torch.optim.SGD(critic.parameters(), lr=0.0), actor_t, critic_t, obs,
                               actions, rewards, next_obs, done, 0.9)
@@ -73,7 +76,7 @@ def test_a_stored_trace_loads_as_arrays(tmp_path):
 
 @pytest.mark.parametrize("argv, message", [
     (["ddpg-modern-1m/no-such-run", "--seeds", "0", "--steps", "10"], "has no run"),
-    (["ppo-mujoco-1m/hopper", "--seeds", "0", "--steps", "10"], "DDPG runs only"),
+    (["ppo-mujoco-1m/hopper", "--seeds", "0", "--steps", "10"], "watches ddpg and td3"),
     (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "2000000"], "between 1 and"),
     (["ddpg-modern-1m", "--seeds", "0", "--steps", "10"], "EXPERIMENT/RUN"),
     (["ddpg-modern-1m/humanoid", "--seeds", "x", "--steps", "10"], "comma-separated"),

@@ -21,9 +21,12 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 import torch
+
+from rlcore.offpolicy import Minibatch
 
 COLUMNS = ("step", "learn_step", "y_mean", "y_max", "q_mean", "q_absmax", "loss", "r_mean", "obs_clipped")
 """One row per probed update: environment step, learning step (1 = the first update), the minibatch's mean and
@@ -31,27 +34,30 @@ largest target y, its mean and largest |Q(s, a)|, the loss (1/N) sum (y - Q)^2, 
 ``reward_scale``), and the share of its normalized observations at the +-10 clip."""
 
 
-def critic_stats(critic: torch.nn.Module, actor_t: torch.nn.Module, critic_t: torch.nn.Module, obs: torch.Tensor,
-                 actions: torch.Tensor, rewards: torch.Tensor, next_obs: torch.Tensor, terminated: torch.Tensor,
-                 gamma: float, clip: float = 10.0) -> dict[str, float]:
-    """What one critic update is about to regress on: the targets y (as :func:`rlcore.ddpg.critic_target` makes
-    them), the critic's Q(s, a) on the same minibatch, their squared error, and the critic's weight norms."""
-    from rlcore.ddpg import critic_target
-
+def critic_stats(critic: torch.nn.Module, target: Callable[[], torch.Tensor], mb: Minibatch,
+                 clip: float = 10.0) -> dict[str, float]:
+    """What one critic update is about to regress on: the targets y (``target()``, as the algorithm's update makes
+    them), the critic's Q(s, a) on the same minibatch (the first critic's, for a twin critic), their squared error,
+    and the critic's weight norms."""
     with torch.no_grad():
-        y = critic_target(actor_t, critic_t, next_obs, rewards, terminated, gamma)
-        q = critic(obs, actions)
+        y = target()
+        q = critic.q1(mb.obs, mb.actions) if hasattr(critic, "q1") else critic(mb.obs, mb.actions)
         return {"y_mean": float(y.mean()), "y_max": float(y.max()), "q_mean": float(q.mean()),
                 "q_absmax": float(q.abs().max()), "loss": float(((q - y) ** 2).mean()),
-                "r_mean": float(rewards.mean()), "obs_clipped": float((obs.abs() >= clip).float().mean()),
-                "weight_norms": [float(p.norm()) for p in critic.parameters() if p.dim() == 2]}
+                "r_mean": float(mb.rewards.mean()), "obs_clipped": float((mb.obs.abs() >= clip).float().mean()),
+                "weight_norms": [float(p.norm()) for p in critic.parameters() if p.dim() >= 2]}
+
+
+TRACEABLE = ("ddpg", "td3")
+"""The algorithms whose train() takes a probe."""
 
 
 @dataclass
 class CriticProbe:
-    """Called before every critic update of :func:`rlcore.ddpg.train`; records :func:`critic_stats` on the 1st,
-    (every+1)-th, (2 every+1)-th ... update. It computes with ``no_grad`` and draws no random numbers, so the run
-    it watches is the run without it."""
+    """Called before every learning step of an off-policy ``train`` (:data:`rlcore.offpolicy.Probe`); records
+    :func:`critic_stats` on the 1st, (every+1)-th, (2 every+1)-th ... update. It computes with ``no_grad``, and
+    computes the targets with torch's random generator forked (TD3's target noise draws from it: the update then
+    draws the same noise), so the run it watches is the run without it."""
 
     every: int = 500
     rows: list[dict[str, Any]] = field(default_factory=list)
@@ -61,37 +67,41 @@ class CriticProbe:
         if self.every < 1:
             raise ValueError(f"every must be at least 1, got {self.every}")
 
-    def __call__(self, step: int, critic, actor_t, critic_t, obs, actions, rewards, next_obs, terminated,
+    def __call__(self, step: int, mb: Minibatch, critic: torch.nn.Module, target: Callable[[], torch.Tensor],
                  gamma: float) -> None:
         self.updates += 1
         if (self.updates - 1) % self.every == 0:
-            self.rows.append({"step": int(step), "learn_step": self.updates,
-                              **critic_stats(critic, actor_t, critic_t, obs, actions, rewards, next_obs, terminated,
-                                             gamma)})
+            with torch.random.fork_rng(devices=[]):
+                stats = critic_stats(critic, target, mb)
+            self.rows.append({"step": int(step), "learn_step": self.updates, **stats})
 
 
 def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 500, progress: bool = False,
-               changes: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Re-train ``seed`` of ``experiment/run`` (a DDPG run of the registry) for its first ``steps`` steps with a
-    :class:`CriticProbe`; returns the rows and the re-run's evaluations. ``changes`` overrides Config fields of the
-    run (then it is a different run, and its evaluations will not match the stored ones)."""
-    from rlcore import ddpg
+               changes: dict[str, Any] | None = None, algo: str | None = None) -> dict[str, Any]:
+    """Re-train ``seed`` of ``experiment/run`` (a DDPG or TD3 run of the registry) for its first ``steps`` steps with
+    a :class:`CriticProbe`; returns the rows and the re-run's evaluations. ``changes`` overrides Config fields of the
+    run, and ``algo`` trains it with another algorithm that takes those fields (``td3`` on a DDPG run: then it is a
+    different run, and its evaluations will not match the stored ones)."""
+    from rlcore.algos import get_algorithm
     from rlcore.experiments.runner import chosen_runs
 
     spec = chosen_runs(experiment, [run])[0]
-    if spec.algo != "ddpg":
-        raise ValueError(f"{experiment}/{run} is a {spec.algo} run; the critic trace watches DDPG runs only")
+    algo = algo or spec.algo
+    if algo not in TRACEABLE:
+        raise ValueError(f"{experiment}/{run} would train {algo}; the critic trace watches {' and '.join(TRACEABLE)}")
     if not 0 < steps <= spec.steps:
         raise ValueError(f"--steps must be between 1 and the run's {spec.steps:,} steps, got {steps:,}")
+    module = get_algorithm(algo)
+    config = module.make_config(algo, **{k: v for k, v in {**spec.overrides, **(changes or {})}.items()
+                                         if k in module.Config.__dataclass_fields__})
     probe = CriticProbe(every)
-    res = ddpg.train(spec.env_id, ddpg.make_config(spec.algo, **{**spec.overrides, **(changes or {})}), steps=steps, seed=seed,
-                     out=None, progress=progress, probe=probe)
+    res = module.train(spec.env_id, config, steps=steps, seed=seed, out=None, progress=progress, probe=probe)
     return {"rows": probe.rows, "eval_steps": [int(s) for s in res.eval_steps],
             "eval_returns": [float(r) for r in res.eval_returns]}
 
 
 def trace(experiment_run: str, seeds: list[int], steps: int, every: int = 500, progress: bool = False,
-          changes: dict[str, Any] | None = None) -> dict[str, Any]:
+          changes: dict[str, Any] | None = None, algo: str | None = None) -> dict[str, Any]:
     """:func:`trace_seed` for each seed of ``experiment/run``, with what the run is."""
     from rlcore.experiments.runner import chosen_runs
 
@@ -100,8 +110,8 @@ def trace(experiment_run: str, seeds: list[int], steps: int, every: int = 500, p
         raise ValueError(f"expected EXPERIMENT/RUN such as ddpg-modern-1m/humanoid, got {experiment_run!r}")
     spec = chosen_runs(experiment, [run])[0]
     return {"experiment": experiment, "run": run, "env_id": spec.env_id, "overrides": spec.overrides,
-            "changes": changes or {}, "steps": steps, "every": every, "columns": list(COLUMNS),
-            "seeds": {str(s): trace_seed(experiment, run, s, steps, every, progress, changes) for s in seeds}}
+            "changes": changes or {}, "algo": algo or spec.algo, "steps": steps, "every": every, "columns": list(COLUMNS),
+            "seeds": {str(s): trace_seed(experiment, run, s, steps, every, progress, changes, algo) for s in seeds}}
 
 
 def matches_stored(seed_trace: dict[str, Any], stored_evals: dict[str, np.ndarray]) -> bool:
@@ -141,15 +151,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", required=True, help="the JSON record to write")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="change a Config field of the run (repeatable): a what-if, no longer the stored run")
+    p.add_argument("--algo", choices=TRACEABLE, help="train the run's seed with this algorithm instead (td3 on a DDPG "
+                   "run: its settings, TD3's devices; --set switches each off)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     torch_threads()  # one thread, as `experiments run` trains: the same thread count gives the same run
     try:
-        from rlcore.ddpg import Config
+        from rlcore.algos import get_algorithm
 
-        changes = overrides(Config, args.set or [])
+        changes = overrides(get_algorithm(args.algo or "ddpg").Config, args.set or [])
         record = trace(args.run, args.seeds, args.steps, args.every, progress=not args.no_progress,
-                       changes=changes)
+                       changes=changes, algo=args.algo)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
