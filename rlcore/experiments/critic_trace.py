@@ -76,6 +76,26 @@ class CriticProbe:
             self.rows.append({"step": int(step), "learn_step": self.updates, **stats})
 
 
+def settings_for(algo: str, spec: Any) -> dict[str, Any]:
+    """The Config fields ``algo`` trains ``spec``'s run with: the run's overrides, or, for another algorithm, every
+    setting of the run's own Config that ``algo`` shares (DDPG's ``noise_sigma`` is TD3's ``exploration_noise``), so
+    that only the algorithm differs: same networks, step sizes, batch, memory, noise and observation scaling."""
+    from dataclasses import asdict
+
+    from rlcore.algos import get_algorithm
+
+    if algo == spec.algo:
+        return dict(spec.overrides)
+    source = get_algorithm(spec.algo)
+    settings = asdict(source.make_config(spec.algo, **spec.overrides))
+    if spec.algo == "ddpg" and algo == "td3":
+        if settings["exploration"] != "gaussian" or settings["explore_decay"] != 1.0:
+            raise ValueError(f"TD3 explores with constant Gaussian noise; {spec.name} explores otherwise")
+        settings["exploration_noise"] = settings["noise_sigma"]
+    fields = get_algorithm(algo).Config.__dataclass_fields__
+    return {k: v for k, v in settings.items() if k in fields}
+
+
 def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 500, progress: bool = False,
                changes: dict[str, Any] | None = None, algo: str | None = None) -> dict[str, Any]:
     """Re-train ``seed`` of ``experiment/run`` (a DDPG or TD3 run of the registry) for its first ``steps`` steps with
@@ -92,8 +112,7 @@ def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 50
     if not 0 < steps <= spec.steps:
         raise ValueError(f"--steps must be between 1 and the run's {spec.steps:,} steps, got {steps:,}")
     module = get_algorithm(algo)
-    config = module.make_config(algo, **{k: v for k, v in {**spec.overrides, **(changes or {})}.items()
-                                         if k in module.Config.__dataclass_fields__})
+    config = module.make_config(algo, **{**settings_for(algo, spec), **(changes or {})})
     probe = CriticProbe(every)
     res = module.train(spec.env_id, config, steps=steps, seed=seed, out=None, progress=progress, probe=probe)
     return {"rows": probe.rows, "eval_steps": [int(s) for s in res.eval_steps],

@@ -77,8 +77,8 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, w
     return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
 
 
-LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv")
-"""What a seed's results folder holds besides ``policy.pt``: settings, provenance and the two logs."""
+LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv", "alpha.csv")
+"""What a seed's results folder holds besides ``policy.pt``: settings, provenance and the logs (SAC's temperature in ``alpha.csv``)."""
 
 SNAPSHOT = "snapshot.json"
 """In a results folder without ``policy.pt``: the seed is still training, and these are its logs so far."""
