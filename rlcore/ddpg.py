@@ -163,9 +163,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     actor_opt, critic_opt = make_optimizers(actor, critic, config)
     buffer = make_replay(config, sp, seed)
     noise, param_noise = make_exploration(config, sp["act_dim"], seed)
-    # [ddpg-normalize]
     observations = Observations(sp["obs_dim"], config.normalize_obs)  # raw, or scaled by running statistics
-    # [/ddpg-normalize]
 
     run = Run("ddpg", env_id, config, steps, seed, out, progress, desc=f"DDPG {env_id}", close=(env, eval_env),
               evaluate=lambda: evaluation(saved_policy(actor, observations), eval_env, config.eval_episodes,
