@@ -156,6 +156,21 @@ ANATOMY_COLUMNS = (("return", "return"), ("length", "length"), ("fell", "fell"),
                    ("saturated", "actions at a bound"))
 
 
+def forward_velocity(anatomy: Mapping[str, float], env_id: str) -> float:
+    """The mean forward velocity (m/s) over an anatomy's episodes: its forward reward per step over the task's
+    ``forward_reward_weight`` (Humanoid-v5 pays 1.25 per m/s, HalfCheetah-v5 and Hopper-v5 1)."""
+    from rlcore.envs import env_setting
+
+    if anatomy["length"] <= 0:
+        raise ValueError("an anatomy of episodes without steps has no velocity")
+    return float(anatomy["reward_forward"]) / anatomy["length"] / float(env_setting(env_id, "forward_reward_weight"))
+
+
+def forward_share(anatomy: Mapping[str, float]) -> float:
+    """The share of the return earned by moving forward (the forward reward over the return)."""
+    return float(anatomy["reward_forward"]) / float(anatomy["return"])
+
+
 def anatomy_row(anatomy: Mapping[str, float]) -> dict[str, str]:
     """One table row of a :func:`reward_anatomy` result: the terms in whole numbers, falls and actions at a bound
     in per cent, under the column names the book's tables use."""

@@ -91,3 +91,13 @@ def test_the_command_line_refuses_bad_input_in_one_line(tmp_path, capsys, argv, 
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and err[0].startswith("error:") and message in err[0], err
     assert not out.exists()
+
+
+def test_overestimation_is_the_mean_target_over_what_the_mean_reward_is_worth_forever():
+    seed = {"learn_step": np.array([1, 501, 1001]), "y_mean": np.array([100.0, 900.0, 20_000.0]),
+            "r_mean": np.array([1.0, 1.0, 1.0])}
+    assert critic_trace.forever_value(seed, 0.99) == pytest.approx(100.0)
+    np.testing.assert_allclose(critic_trace.overestimation(seed, 0.99), [1.0, 9.0, 200.0])
+    assert critic_trace.first_runaway(seed, 0.99) == 1001
+    assert critic_trace.first_runaway(seed, 0.99, factor=5) == 501
+    assert critic_trace.first_runaway(seed, 0.99, factor=1_000) is None

@@ -130,3 +130,34 @@ def test_tanh_saturation():
     with pytest.raises(ValueError, match="Tanh"):
         tanh_saturation(torch.nn.Linear(3, 2), obs)
 
+
+
+def test_forward_velocity_and_share_from_an_anatomy():
+    from rlcore.mujoco_analysis import forward_share, forward_velocity
+
+    walking = {"reward_forward": 1_250.0, "length": 1_000.0, "return": 6_000.0}
+    assert forward_velocity(walking, "Humanoid-v5") == pytest.approx(1.0)      # 1.25 per m/s
+    assert forward_velocity(walking, "HalfCheetah-v5") == pytest.approx(1.25)  # 1 per m/s
+    assert forward_share(walking) == pytest.approx(1_250 / 6_000)
+    with pytest.raises(ValueError, match="without steps"):
+        forward_velocity({"reward_forward": 0.0, "length": 0.0}, "Humanoid-v5")
+
+
+def test_forward_velocity_is_the_mean_x_velocity_of_the_episodes():
+    import numpy as np
+
+    from rlcore.envs import make_env
+    from rlcore.mujoco_analysis import forward_velocity, reward_anatomy
+
+    rng = np.random.default_rng(0)
+    policy = lambda obs: rng.uniform(-0.4, 0.4, 17)  # noqa: E731
+    anatomy = reward_anatomy(policy, "Humanoid-v5", episodes=1, seed=5)
+    rng = np.random.default_rng(0)
+    env = make_env("Humanoid-v5")
+    env.reset(seed=5)
+    velocities, done = [], False
+    while not done:
+        _, _, terminated, truncated, info = env.step(policy(None))
+        velocities.append(info["x_velocity"])
+        done = terminated or truncated
+    assert forward_velocity(anatomy, "Humanoid-v5") == pytest.approx(np.mean(velocities), rel=1e-9)

@@ -158,6 +158,25 @@ def load_trace(path: str | Path) -> dict[str, Any]:
     return record
 
 
+def forever_value(seed_trace: dict[str, Any], gamma: float) -> float:
+    """r / (1 - gamma) for the mean reward of a loaded seed trace's minibatches: what receiving it forever is worth,
+    the scale a critic's targets should keep to."""
+    return float(np.mean(seed_trace["r_mean"])) / (1 - gamma)
+
+
+def overestimation(seed_trace: dict[str, Any], gamma: float) -> np.ndarray:
+    """Each row's mean target y over :func:`forever_value`: about 1 for a critic in scale, thousands for one that ran
+    away."""
+    return np.asarray(seed_trace["y_mean"], dtype=float) / forever_value(seed_trace, gamma)
+
+
+def first_runaway(seed_trace: dict[str, Any], gamma: float, factor: float = 10.0) -> int | None:
+    """The first learning step at which the mean target exceeds ``factor`` times :func:`forever_value`, or None if
+    it never does."""
+    over = np.flatnonzero(overestimation(seed_trace, gamma) > factor)
+    return int(seed_trace["learn_step"][over[0]]) if len(over) else None
+
+
 def main(argv: list[str] | None = None) -> int:
     from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, overrides, seed_list
     from rlcore.runs import run_metadata, torch_threads, write_json
