@@ -27,6 +27,7 @@ from rlcore.config import check_budget, check_config
 from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
 from rlcore.nets import soft_update
 from rlcore.noise import exploration_state, first_behaviour, make_exploration, noise_sigma
+from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,  # noqa: F401
                               OffPolicyConfig, OffPolicyLoop, Probe, frozen, make_replay)
 from rlcore.offpolicy import check_spaces as _check_spaces
@@ -220,8 +221,5 @@ def make_config(algo: str, **overrides: Any) -> Config:
 
 
 def load_policy(ckpt: dict[str, Any]) -> DeterministicPolicy:
-    sp = ckpt["spaces"]
-    config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
-    actor = Actor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
-    actor.load_state_dict(ckpt["actor"])
-    return DeterministicPolicy(actor, ckpt.get("obs_mean"), ckpt.get("obs_var"))
+    """The deterministic policy of a checkpoint or ``policy.pt``."""
+    return DeterministicPolicy(saved_actor(ckpt, Config, Actor), ckpt.get("obs_mean"), ckpt.get("obs_var"))

@@ -279,6 +279,17 @@ class DeterministicPolicy:
             return self.actor(torch.as_tensor(x, dtype=torch.float32).unsqueeze(0))[0].numpy()
 
 
+def saved_actor(ckpt: dict[str, Any], config_cls: type, actor_cls: type) -> nn.Module:
+    """The actor a checkpoint (or a ``policy.pt``) holds, rebuilt from its spaces and Config."""
+    from rlcore.runs import config_from_dict
+
+    sp = ckpt["spaces"]
+    config = config_from_dict(config_cls, ckpt["config"])
+    actor = actor_cls(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
+    actor.load_state_dict(ckpt["actor"])
+    return actor
+
+
 # --- the loop -----------------------------------------------------------------------------------
 
 

@@ -40,6 +40,7 @@ from torch import nn
 from rlcore.config import POSITIVE, check_budget, check_config
 from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
 from rlcore.nets import mlp, soft_update
+from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, DeterministicPolicy, Minibatch, Observations, OffPolicyConfig,
                               OffPolicyLoop, TwinCritic, box_buffers, frozen, make_envs, make_replay, min_q)
 
@@ -267,8 +268,6 @@ def make_config(algo: str, **overrides: Any) -> Config:
 
 
 def load_policy(ckpt: dict[str, Any]) -> DeterministicPolicy:
-    sp = ckpt["spaces"]
-    config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
-    actor = SquashedGaussianActor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
-    actor.load_state_dict(ckpt["actor"])
-    return DeterministicPolicy(MeanAction(actor), ckpt.get("obs_mean"), ckpt.get("obs_var"))
+    """The deterministic policy of a checkpoint or ``policy.pt``."""
+    return DeterministicPolicy(MeanAction(saved_actor(ckpt, Config, SquashedGaussianActor)), ckpt.get("obs_mean"),
+                               ckpt.get("obs_var"))
