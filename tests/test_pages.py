@@ -143,3 +143,13 @@ def test_check_printed_refuses_another_count_of_values():
 
     with pytest.raises(AssertionError, match="prints 2 numbers"):
         check_printed("1,030 ± 21", 1_030.0)
+
+
+def test_check_printed_with_a_page_also_finds_the_sentence_there(tmp_path):
+    from rlcore.experiments.pages import check_printed
+
+    page = tmp_path / "page.md"
+    page.write_text("All three seeds end within 150 of\n1,000 (1,030 ±  21). More prose.\n", encoding="utf-8")
+    check_printed("within 150 of 1,000 (1,030 ± 21)", 150, 1_000, 1_030.2, 20.8, page=page)   # across a line break
+    with pytest.raises(AssertionError, match="is not in"):
+        check_printed("within 150 of 1,000 (1,031 ± 21)", 150, 1_000, 1_031, 21, page=page)

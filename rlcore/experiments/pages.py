@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from rlcore.experiments.registry import RunSpec, get_experiment
@@ -141,7 +142,7 @@ def printed_numbers(text: str) -> list[tuple[str, float, int]]:
     return found
 
 
-def check_printed(text: str, *values: Any) -> str:
+def check_printed(text: str, *values: Any, page: str | Path | None = None) -> str:
     """Check that every number printed in ``text`` is the matching value of ``values``, rounded as it is printed,
     and return ``text`` (so a page can display what it checked).
 
@@ -151,7 +152,12 @@ def check_printed(text: str, *values: Any) -> str:
     ``AssertionError``, naming each number that differs, if one does or if ``text`` holds another count of numbers
     than ``values``. No tolerance is wider than the printed rounding: a page that means "about" a number and accepts
     more says why and checks it with its own assert.
+
+    With ``page`` (the chapter's ``.md`` file), ``text`` must also occur in that page as written (line breaks and
+    runs of spaces count as one space), so that a sentence edited in the prose but not in its check fails too.
     """
+    if page is not None and _spaces(text) not in _spaces(Path(page).read_text(encoding="utf-8")):
+        raise AssertionError(f"{text!r} is not in {page}: the prose changed; check the sentence as it is now")
     numbers = printed_numbers(text)
     if len(numbers) != len(values):
         raise AssertionError(f"{text!r} prints {len(numbers)} numbers {[n for n, _, _ in numbers]}, "
@@ -168,4 +174,8 @@ def check_printed(text: str, *values: Any) -> str:
     if wrong:
         raise AssertionError(f"stale numbers in {text!r}: " + "; ".join(wrong))
     return text
+
+
+def _spaces(text: str) -> str:
+    return " ".join(text.split())
 # [check-printed]
