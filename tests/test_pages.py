@@ -99,3 +99,57 @@ def test_page_runs_without_live_fallback_shows_what_results_has_and_says_what_is
     assert runs["base"] is stored["base"] and runs.complete("base") and not runs["wide"].seeds
     text = runs.describe(runs["wide"])
     assert text.startswith(":::{warning}") and "holds none of its 2 seeds" in text and "*Wide*" in text
+
+
+# check_printed: a number is checked at the precision it is printed
+
+
+def test_printed_numbers_reads_signs_commas_decimals_and_skips_names():
+    from rlcore.experiments.pages import printed_numbers
+
+    text = "PPO-v1 on Hopper-v5: 1,030 ± 21, −1,081 and +224; 2.1 % of 0.55–0.80. It is 41."
+    assert [(n, v, d) for n, v, d in printed_numbers(text)] == [
+        ("1,030", 1030.0, 0), ("21", 21.0, 0), ("−1,081", -1081.0, 0), ("+224", 224.0, 0), ("2.1", 2.1, 1),
+        ("0.55", 0.55, 2), ("0.80", 0.8, 2), ("41", 41.0, 0)]
+
+
+def test_check_printed_passes_values_that_round_to_the_printed_numbers_and_returns_the_text():
+    from rlcore.experiments.pages import check_printed
+
+    assert check_printed("1,030 ± 21", 1_029.6, 21.4) == "1,030 ± 21"
+    check_printed("−1,081 against 2.1 %", -1_080.7, 2.14)
+    check_printed("0 and 0.0", -0.3, -0.04)                        # -0.3 prints as 0, not -0
+    check_printed("report 8,470.7, ours 3,461", ..., 3_460.9)   # ... skips a number the page does not compute
+
+
+@pytest.mark.parametrize("text, values, stale", [
+    ("1,030 ± 21", (1_029.9, 19.1), "21 (the value 19.10 prints as 19)"),     # the example
+    ("707 ± 222", (708.3, 222.0), "707"),
+    ("gap 164", (160.4,), "164"),
+    ("within 2.1 %", (2.04,), "2.1"),
+    ("δ₂ is −0.4", (-0.2,), "−0.4"),
+    ("+224", (-224.0,), "+224"),
+])
+def test_check_printed_names_each_stale_number(text, values, stale):
+    from rlcore.experiments.pages import check_printed
+
+    with pytest.raises(AssertionError, match="stale numbers") as info:
+        check_printed(text, *values)
+    assert stale in str(info.value)
+
+
+def test_check_printed_refuses_another_count_of_values():
+    from rlcore.experiments.pages import check_printed
+
+    with pytest.raises(AssertionError, match="prints 2 numbers"):
+        check_printed("1,030 ± 21", 1_030.0)
+
+
+def test_check_printed_with_a_page_also_finds_the_sentence_there(tmp_path):
+    from rlcore.experiments.pages import check_printed
+
+    page = tmp_path / "page.md"
+    page.write_text("All three seeds end within 150 of\n1,000 (1,030 ±  21). More prose.\n", encoding="utf-8")
+    check_printed("within 150 of 1,000 (1,030 ± 21)", 150, 1_000, 1_030.2, 20.8, page=page)   # across a line break
+    with pytest.raises(AssertionError, match="is not in"):
+        check_printed("within 150 of 1,000 (1,031 ± 21)", 150, 1_000, 1_031, 21, page=page)

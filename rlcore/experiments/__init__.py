@@ -96,4 +96,4 @@ from rlcore.experiments.analysis import (  # noqa: F401
     iqm_ci,
     iqm_difference_ci,
 )
-from rlcore.experiments.pages import PageRuns, check_results  # noqa: F401
+from rlcore.experiments.pages import PageRuns, check_printed, check_results, printed_numbers  # noqa: F401

@@ -5,11 +5,17 @@ stand-in, with a legend label that says which, the provenance to print under a f
     runs = PageRuns("dqn-cartpole", fallback_steps=20_000, fallback_seeds=[0, 1])
     dqn = runs["dqn"]                  # every seed results/ has, or a live stand-in if it has none
     runs.legend(dqn), runs.describe(dqn)
+
+and a sentence's numbers checked at the precision they are printed (see :func:`check_printed`):
+
+    check_printed("1,030 ± 21", final.mean(), final.std())   # passes for 1,029.6 ± 21.4, fails for ± 19.1
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from rlcore.experiments.registry import RunSpec, get_experiment
@@ -115,3 +121,61 @@ def _as_json(value: Any) -> Any:
     if isinstance(value, dict):
         return {k: _as_json(v) for k, v in value.items()}
     return value
+
+
+# [check-printed]
+# A number as prose prints it: an optional sign (ASCII or the typographic minus), digits with optional thousands
+# commas, optional decimals. "1,030", "−1,081", "+224", "0.55", "2.1" (of "2.1 %"). A number glued to a letter
+# before it ("PPO-v1", "Hopper-v5") is a name, not a number. A range is written with an en dash ("0.55–0.80"):
+# an ASCII hyphen between two numbers reads as a minus sign.
+_NUMBER = re.compile(r"(?<![\w.,])([+\-\u2212]?)(\d{1,3}(?:,\d{3})+|\d+)(?:\.(\d+))?(?!\d)")
+
+
+def printed_numbers(text: str) -> list[tuple[str, float, int]]:
+    """Each number in ``text`` as ``(as printed, value, decimals)``, in order. A comma or point that ends a
+    sentence or a clause ("720, the", "is 41.") is not part of the number."""
+    found = []
+    for m in _NUMBER.finditer(text):
+        sign, whole, decimals = m.group(1), m.group(2), m.group(3) or ""
+        value = float(whole.replace(",", "") + ("." + decimals if decimals else ""))
+        found.append((m.group(0), -value if sign in ("-", "\u2212") else value, len(decimals)))
+    return found
+
+
+def check_printed(text: str, *values: Any, page: str | Path | None = None) -> str:
+    """Check that every number printed in ``text`` is the matching value of ``values``, rounded as it is printed,
+    and return ``text`` (so a page can display what it checked).
+
+    The i-th number of ``text`` is compared with ``values[i]`` at the number of decimals it is printed with:
+    "1,030 ± 21" passes for (1,029.6, 21.4) and fails for (1,029.9, 19.1), since 19.1 prints as 19. ``...`` (Ellipsis)
+    skips a number that is not computed (a year, a setting the sentence names, the report's own figure). Raises
+    ``AssertionError``, naming each number that differs, if one does or if ``text`` holds another count of numbers
+    than ``values``. No tolerance is wider than the printed rounding: a page that means "about" a number and accepts
+    more says why and checks it with its own assert.
+
+    With ``page`` (the chapter's ``.md`` file), ``text`` must also occur in that page as written (line breaks and
+    runs of spaces count as one space), so that a sentence edited in the prose but not in its check fails too.
+    """
+    if page is not None and _spaces(text) not in _spaces(Path(page).read_text(encoding="utf-8")):
+        raise AssertionError(f"{text!r} is not in {page}: the prose changed; check the sentence as it is now")
+    numbers = printed_numbers(text)
+    if len(numbers) != len(values):
+        raise AssertionError(f"{text!r} prints {len(numbers)} numbers {[n for n, _, _ in numbers]}, "
+                             f"but {len(values)} values were given")
+    wrong = []
+    for (as_printed, number, decimals), value in zip(numbers, values):
+        if value is ...:
+            continue
+        rounded = round(float(value), decimals)
+        if rounded == 0:
+            rounded = 0.0                                      # -0.0 prints as 0
+        if rounded != number:
+            wrong.append(f"{as_printed} (the value {float(value):,.{decimals + 2}f} prints as {rounded:,.{decimals}f})")
+    if wrong:
+        raise AssertionError(f"stale numbers in {text!r}: " + "; ".join(wrong))
+    return text
+
+
+def _spaces(text: str) -> str:
+    return " ".join(text.split())
+# [check-printed]

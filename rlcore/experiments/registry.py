@@ -314,6 +314,42 @@ def _ppo_report_halfcheetah() -> Experiment:
     )
 
 
+
+# ---- Issue 35: two pending runs the report pages name (not yet trained; each page says so and gives the command) ----
+# The report's HalfCheetah PPO-v1 (Table 5) as literally as rlcore's options allow, beside the translated arm above:
+# gamma 0.9 (our reading of its "smooth-factor 0.9": the widely copied PPO code its table matches has GAMMA = 0.9),
+# no observation or reward normalization, reward-factor 8 as HalfCheetah's own reward weights x 8 (its reward is
+# forward_reward_weight * velocity - ctrl_cost_weight * |a|^2, so the logs read 8 x the task's return), the actor's
+# step size 1e-4 for both networks (rlcore has one Adam step size; the report's critic had 1e-3), and no gradient
+# clipping (the report has none; rlcore's max_grad_norm must be positive, so a bound never reached).
+REPORT_PPO_HALFCHEETAH_LITERAL: dict[str, Any] = {
+    **REPORT_PPO_HALFCHEETAH, "gamma": 0.9, "learning_rate": 1e-4, "normalize_obs": False, "normalize_reward": False,
+    "max_grad_norm": 1e9, "env_kwargs": {"forward_reward_weight": 8.0, "ctrl_cost_weight": 0.8},
+}
+REPORT_PPO_REWARD_FACTOR = 8.0
+
+
+def _ppo_report_halfcheetah_literal() -> Experiment:
+    return Experiment(
+        "ppo-report-halfcheetah-literal",
+        "PPO-v1 of the course report (Table 5) as literally as rlcore allows: gamma 0.9, reward x 8, no normalization, "
+        "step size 1e-4, no gradient clipping; 250k steps, 3 seeds",
+        (RunSpec("literal", "ppo", "HalfCheetah-v5", 250_000, (0, 1, 2), REPORT_PPO_HALFCHEETAH_LITERAL,
+                 "PPO-clip, the report's table as literally as rlcore allows"),),
+    )
+
+
+def _dppo_halfcheetah_one_worker() -> Experiment:
+    # Chapter 7's 2-worker run with one worker: the same settings per worker and the same 1M-step budget, so that
+    # the page can set what two workers buy or cost in return (not only in speed) beside the one-worker baseline.
+    return Experiment(
+        "dppo-halfcheetah-one-worker",
+        "Distributed PPO on HalfCheetah-v5 with 1 worker (torchrun), otherwise as dppo-halfcheetah: 1M steps, 1 seed",
+        (RunSpec("one-worker", "dppo", "HalfCheetah-v5", 1_000_000, (0,), {"eval_every": 50_000},
+                 "DPPO on HalfCheetah-v5, 1 worker, 1M steps", workers=1),),
+    )
+# ---- end of issue 35's pending runs ----
+
 def _dppo_halfcheetah() -> Experiment:
     # Chapter 7's own command, `torchrun --nproc_per_node 2 -m rlcore.dppo --env HalfCheetah-v5 --steps 1000000`:
     # two workers, PPO's defaults (the PPO paper's MuJoCo settings) per worker, gradients shared by DDP. The
@@ -361,6 +397,8 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "ddpg-modern": _ddpg_modern,
     "ddpg-modern-1m": _ddpg_modern_1m,
     "ppo-report-hopper": _ppo_report_hopper,
+    "ppo-report-halfcheetah-literal": _ppo_report_halfcheetah_literal,   # issue 35, pending
+    "dppo-halfcheetah-one-worker": _dppo_halfcheetah_one_worker,         # issue 35, pending
     "ppo-report-halfcheetah": _ppo_report_halfcheetah,
     "dppo-halfcheetah": _dppo_halfcheetah,
     "td3-sac-1m": _td3_sac_1m,
