@@ -3,7 +3,8 @@
 On a reader's machine such a test skips with one line that says what to install or set; on continuous integration
 (``CI=true``, as ``.ci/run`` and most CI services set it) the same test fails, so that CI still proves the browser
 test, the rendering and the pins run. Every test that may skip for the machine's sake goes through
-:func:`skip_or_fail`; the root ``conftest.py`` loads this module for the chapters too.
+:func:`skip_or_fail`. (Chapters do not skip: without OpenGL their MuJoCo clips become stills that say why, see
+:func:`rlcore.render.realtime_gif`; ``tests/test_render.py`` is what fails on CI then.)
 """
 
 from __future__ import annotations
