@@ -28,3 +28,8 @@ Modules are imported on demand (``import rlcore.envs``) so that ``import rlcore`
 """
 
 __version__ = "0.1.0"
+
+from rlcore.gl import set_aside_unknown_backend as _set_aside_unknown_backend  # noqa: E402
+
+# A MUJOCO_GL that MuJoCo does not know would stop every MuJoCo task, not only rendering (see rlcore.gl).
+_set_aside_unknown_backend()

@@ -21,14 +21,36 @@ from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, json_object,
 from rlcore.cli import overrides as overrides_of
 
 
-def _load_run(run_dir: str):
-    """(checkpoint, algorithm module, policy) of a run folder or a checkpoint file."""
-    from rlcore.algos import get_algorithm
-    from rlcore.checkpoint import load_checkpoint
+POLICY_FILES = ("policy.pt", "snapshot-policy.pt")
+"""What a results folder holds instead of ``checkpoint.pt``: a finished seed's policy, or a snapshot's."""
+
+
+def run_file(run_dir: str | Path) -> Path:
+    """The file to load from ``run_dir``: itself if a file; in a folder its ``checkpoint.pt`` (a run folder), else
+    its ``policy.pt`` or ``snapshot-policy.pt`` (a seed's folder in ``results/``). A folder with none of them gets
+    the checkpoint's path, whose absence load_checkpoint reports."""
     from rlcore.runs import RunDir
 
     path = Path(run_dir)
-    ckpt = load_checkpoint(RunDir(path).checkpoint if path.is_dir() else path)
+    if not path.is_dir():
+        return path
+    checkpoint = RunDir(path).checkpoint
+    return next((f for f in (checkpoint, *(path / n for n in POLICY_FILES)) if f.is_file()), checkpoint)
+
+
+def _load_run(run_dir: str):
+    """(checkpoint, algorithm module, policy) of a run folder, a results folder or a checkpoint file."""
+    from rlcore.algos import get_algorithm
+    from rlcore.checkpoint import CheckpointError, load_checkpoint
+
+    path = run_file(run_dir)
+    try:
+        ckpt = load_checkpoint(path)
+    except CheckpointError as err:
+        if Path(run_dir).is_dir() and not path.exists():
+            raise CheckpointError(f"No checkpoint at {path} and no {' or '.join(POLICY_FILES)} in {run_dir}: "
+                                  "train first, or check the path.") from None
+        raise err
     module = get_algorithm(ckpt["algo"])
     return ckpt, module, module.load_policy(ckpt)
 

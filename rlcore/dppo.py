@@ -252,6 +252,7 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
               spaces=spaces, obs_clip=OBS_CLIP, distributed=distributed)
     step, iteration, kl_coef = run.resume(step=0, iteration=0, kl_coef=config.kl_coef)
     rng, reset_seed = worker_streams(seed, rank, iteration, resumed=opened[1] is not None)
+    del opened  # the checkpoint is restored: let it go
     model = DistributedDataParallel(agent) if config.share == "gradients" else agent
     normalizers = [rms for rms in (obs_rms, ret_rms) if rms is not None]
     bases = [snapshot(rms) for rms in normalizers]

@@ -29,10 +29,11 @@ A loop tells the run where it is with :meth:`Run.record_episode` (an episode end
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -90,8 +91,9 @@ class Run:
     (data-parallel training opens the folder on one worker only). ``meta``: extra fields for ``meta.json``.
     ``defer_interrupts``: inside ``with run``, a SIGINT or SIGTERM that would interrupt the process stops the
     loop at the end of its current step (:meth:`step_done`) instead of wherever it is, so that the checkpoint it
-    writes is one between two steps; a second one stops at once (data-parallel workers, which must stop
-    together, leave it off).
+    writes is one between two steps; a second one stops at once and writes no checkpoint (the state may be half a
+    step ahead of the counters; the last checkpoint stays). Data-parallel workers, which must stop together, leave
+    it off. With or without it, a signal that comes while a checkpoint is written waits for the write to end.
     """
 
     def __init__(self, algo: str, env_id: str, config: Any, steps: int, seed: int, out: str | os.PathLike | None = None,
@@ -113,6 +115,8 @@ class Run:
         if opened is None:
             opened = open_run(out, algo, env_id, seed, steps, config, schedules=schedules, **(meta or {}))
         self.folder, self.ckpt = opened
+        """The checkpoint being resumed, until :meth:`resume` has restored it (then None)."""
+        self._resumed: dict[str, Any] | None = None
         self.tracked: dict[str, Any] = {}
         self.constants: dict[str, Any] = {}
         self.counters: dict[str, Any] = {}
@@ -153,24 +157,40 @@ class Run:
 
     def resume(self, **counters: Any) -> Any:
         """Restore every tracked object from the checkpoint being resumed (if any) and return the counters
-        (``step=0, episode=0``, say) as the checkpoint has them, or as given. A tracked key the checkpoint
-        lacks (a replay memory left out of it) is not restored."""
-        ckpt = self.ckpt
+        (``step=0, episode=0``, say) as the checkpoint has them, or as given. A checkpoint that lacks a tracked
+        key (a replay memory) cannot resume the run: ValueError, in one line. Once restored, the loaded checkpoint
+        is let go (a resumed run would otherwise hold its replay memory twice); :meth:`resume_episode` keeps
+        what it needs."""
+        ckpt, self.ckpt = self.ckpt, None
         if ckpt is not None:
+            self._check_complete(ckpt)
             for key, value in self.tracked.items():
                 if isinstance(value, Saved):
                     value.load(ckpt)
-                elif key not in ckpt:
-                    continue
                 elif isinstance(value, np.random.Generator):
                     value.bit_generator.state = ckpt[key]
                 else:
                     value.load_state_dict(ckpt[key])
             counters = {k: type(v)(ckpt[k]) for k, v in counters.items()}
             self.episode = int(ckpt.get("episode", 0))
+            # what resume_episode reads: the episode in progress and the Saved pairs' entries (small), not the
+            # networks, optimizers and replay memories just restored
+            restored = {k for k, v in self.tracked.items() if not isinstance(v, Saved)}
+            self._resumed = {k: v for k, v in ckpt.items() if k not in restored}
         self.counters = dict(counters)
         values = tuple(counters.values())
         return values[0] if len(values) == 1 else values
+
+    def _check_complete(self, ckpt: dict[str, Any]) -> None:
+        """ValueError (one line) if ``ckpt`` lacks a tracked key, or an entry a Saved pair restores."""
+        missing = [k for k, v in self.tracked.items() if not isinstance(v, Saved) and k not in ckpt]
+        for value in self.tracked.values():
+            if isinstance(value, Saved):
+                missing += [k for k in value.save() if k not in ckpt]
+        if missing:
+            where = self.folder.root if self.folder is not None else "the checkpoint"
+            raise ValueError(f"{where} holds a checkpoint without {', '.join(map(repr, missing))}, which this run "
+                             "needs to resume exactly; train it in another --out folder, or delete this one.")
 
     def resume_episode(self, env: Any, reset_seed: int, observation: Callable[[], Any]) -> Any:
         """The observation the loop acts on first: the checkpoint's episode in progress, put back into ``env``
@@ -181,11 +201,12 @@ class Run:
         has it."""
         obs, _ = env.reset(seed=reset_seed)
         self._episode = (env, observation)
-        saved = None if self.ckpt is None else self.ckpt.get("episode_env")
+        resumed, self._resumed = self._resumed, None
+        saved = None if resumed is None else resumed.get("episode_env")
         if saved is not None and restore_episode(env, saved):
             for value in self.tracked.values():
                 if isinstance(value, Saved):
-                    value.load(self.ckpt)
+                    value.load(resumed)
             return np.asarray(saved["obs"]).copy()
         return obs
 
@@ -210,11 +231,13 @@ class Run:
         return state
 
     def checkpoint(self, episode: bool = True) -> None:
-        """Write ``checkpoint.pt`` (atomically) if the run has a folder; ``episode``: see :meth:`state`."""
+        """Write ``checkpoint.pt`` (atomically) if the run has a folder; ``episode``: see :meth:`state`. A SIGINT or
+        SIGTERM that comes while it is written waits for the write to end (:func:`signals_held`)."""
         if self.folder is None:
             return
-        save_checkpoint(self.folder.checkpoint, self.state(episode))
-        self._saved_at = dict(self.counters)
+        with signals_held():
+            save_checkpoint(self.folder.checkpoint, self.state(episode))
+            self._saved_at = dict(self.counters)
 
     # --- what the loop reports -------------------------------------------------------------------
 
@@ -290,15 +313,18 @@ class Run:
             raise KeyboardInterrupt
         self._stop_requested = True
         tqdm.write(f"{signal.Signals(signum).name}: stopping at the end of this step, with a checkpoint "
-                   "(again to stop at once)")
+                   "(again to stop at once, keeping the last checkpoint)")
 
     def __exit__(self, kind: type | None, exc: BaseException | None, tb: Any) -> None:
         try:
+            between_steps = kind is None or self._stopped_between_steps
             if kind is None or (kind is KeyboardInterrupt and self.checkpoint_on_interrupt):
-                if self._saved_at != self.counters:
+                if self._saved_at != self.counters and (between_steps or not self.defer_interrupts):
                     # an interrupt in the middle of a step leaves the simulator ahead of the loop's observation:
-                    # such a checkpoint holds no episode, and a resumed run starts a new one
-                    self.checkpoint(episode=kind is None or self._stopped_between_steps)
+                    # such a checkpoint holds no episode, and a resumed run starts a new one. Where a run stops
+                    # between steps (defer_interrupts), a second Ctrl-C in the middle of one writes nothing: the
+                    # networks and memories may be half a step ahead of the counters, and the last checkpoint stays
+                    self.checkpoint(episode=between_steps)
         finally:
             for sig, handler in self._handlers.items():
                 signal.signal(sig, handler)
@@ -337,6 +363,28 @@ class Run:
 
     def eval_column(self, name: str) -> np.ndarray:
         return np.array([row[name] for row in self.evals])
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """Inside, a SIGINT or SIGTERM whose handler is Python's (one that would interrupt) is held back: when the block
+    ends, that handler runs as if the signal had just come (a KeyboardInterrupt, a stop request), so that what the
+    block writes is written whole. Only the main thread can hold signals; elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    handlers = {sig: h for sig, h in handlers.items() if callable(h)}
+    for sig in handlers:
+        signal.signal(sig, lambda signum, frame: held.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+    for signum in held:  # the block ended normally: the signals it held back take effect now, in order
+        handlers[signum](signum, None)
 
 
 def evaluation(policy: Any, env: Any, episodes: int, seed: int) -> dict[str, float]:

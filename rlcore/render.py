@@ -1,13 +1,17 @@
 """Offscreen rollouts of a policy to frames and to a GIF.
 
 MuJoCo tasks render through a headless OpenGL backend that :mod:`rlcore.gl` selects (``select_gl_backend`` and
-``HeadlessGLError`` are re-exported here, where the chapters and the command line have always found them).
+``HeadlessGLError`` are re-exported here, where the chapters and the command line have always found them). Where
+none works, :func:`render_gif` raises ``HeadlessGLError``, and :func:`realtime_gif`, the chapters' clips, shows a
+still that says why (:attr:`Clip.missing`), so that a page still builds on such a machine.
 """
 
 from __future__ import annotations
 
 import io
 import os
+import sys
+import textwrap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -166,6 +170,8 @@ class Clip:
     """Environment steps per frame."""
     step_seconds: float
     """Simulated seconds per environment step (:func:`env_dt`)."""
+    missing: str = ""
+    """Why the clip is a still instead (no OpenGL backend renders here), or empty."""
 
     @property
     def fps(self) -> float:
@@ -179,6 +185,8 @@ class Clip:
 
     def caption(self) -> str:
         """E.g. "6 s of simulation in real time: 120 frames at 20 per second, one every step of 0.05 s (0.83 MB)"."""
+        if self.missing:
+            return f"not rendered on this machine, a still says why: {self.missing}"
         every = f"{self.frame_skip} steps" if self.frame_skip > 1 else "step"
         return (f"{self.seconds:.3g} s of simulation in real time: {self.frames} frames at {self.fps:.3g} per "
                 f"second, one every {every} of {self.step_seconds:g} s ({len(self.gif) / 1e6:.2f} MB)")
@@ -223,6 +231,41 @@ def realtime_gif(
     dt = env_dt(env_id, env_kwargs)
     frame_skip = realtime_frame_skip(dt, fps)
     frames = max(1, round(seconds / (frame_skip * dt)))
-    gif = render_gif(env_id, policy, max_frames=frames, seed=seed, fps=1 / (frame_skip * dt), width=width,
-                     height=height, env_kwargs=env_kwargs, frame_skip=frame_skip, colors=colors)
+    try:
+        gif = render_gif(env_id, policy, max_frames=frames, seed=seed, fps=1 / (frame_skip * dt), width=width,
+                         height=height, env_kwargs=env_kwargs, frame_skip=frame_skip, colors=colors)
+    except HeadlessGLError as err:
+        missing = no_gl_reason(err)
+        print(f"{env_id} is not rendered: {missing}", file=sys.stderr)
+        return Clip(still_gif(f"{env_id} is not rendered here: {missing}", width, height), env_id, frames,
+                    frame_skip, dt, missing=missing)
     return Clip(gif, env_id, frames, frame_skip, dt)
+
+
+def gl_status() -> str:
+    """One line for a page: the backend MuJoCo renders with here, or why it cannot (its clips are then stills)."""
+    try:
+        return f"MuJoCo renders with MUJOCO_GL = {select_gl_backend()}"
+    except HeadlessGLError as err:
+        return f"MuJoCo cannot render on this machine, so its clips below are stills: {no_gl_reason(err)}"
+
+
+def no_gl_reason(err: HeadlessGLError) -> str:
+    """One line from a :class:`HeadlessGLError`: what was tried and what fixes it (its first fix)."""
+    lines = [line.strip() for line in str(err).splitlines() if line.strip()]
+    tried = [line for line in lines if line.startswith("MUJOCO_GL=")]
+    fixes = [line for line in lines if line.startswith(("To fix", "EGL"))]
+    fix = " ".join((fixes[-1] if fixes else lines[-1]).removeprefix("EGL (recommended):").split())
+    return f"no OpenGL backend works ({'; '.join(tried)}). {fix if fix.startswith('To fix') else 'To fix it: ' + fix}"
+
+
+def still_gif(text: str, width: int = 320, height: int = 240) -> bytes:
+    """A one-frame GIF, ``width`` x ``height``, that shows ``text`` (wrapped) on grey: what stands in for a clip that
+    could not be rendered."""
+    from PIL import Image, ImageDraw
+
+    image = Image.new("RGB", (width, height), (225, 225, 225))
+    draw = ImageDraw.Draw(image)
+    chars = max(10, width // 7)
+    draw.multiline_text((8, 8), "\n".join(textwrap.wrap(text, chars)), fill=(40, 40, 40))
+    return frames_to_gif([np.asarray(image)], fps=1)

@@ -174,9 +174,10 @@ def command_line() -> str | None:
 
 
 def cpu_model() -> str:
-    """The processor: vendor and model name (from ``/proc/cpuinfo`` where there is one) and PyTorch's CPU
-    capability. The same code and seed give other bits on other processors (MKL takes other kernels on AMD than
-    on Intel), so a result that is reproduced bit for bit names it."""
+    """The processor: vendor and model name (from ``/proc/cpuinfo`` where there is one) and the kernels PyTorch
+    runs on it: its CPU capability, and ``MKL_ENABLE_INSTRUCTIONS`` where that is set. The same code and seed give
+    other bits on other processors (MKL takes other kernels on AMD than on Intel) and with other kernels on the
+    same one, so a result that is reproduced bit for bit names it."""
     import torch
 
     info: dict[str, str] = {}
@@ -188,7 +189,11 @@ def cpu_model() -> str:
         pass
     vendor = info.get("vendor_id", platform.machine())
     model = info.get("model name", platform.processor() or "unknown model")
-    return f"{vendor} {model} ({torch.backends.cpu.get_cpu_capability()})"
+    kernels = torch.backends.cpu.get_cpu_capability()
+    mkl = os.environ.get("MKL_ENABLE_INSTRUCTIONS", "").strip()
+    if mkl:
+        kernels += f", MKL_ENABLE_INSTRUCTIONS={mkl}"
+    return f"{vendor} {model} ({kernels})"
 
 
 def run_metadata(**extra: Any) -> dict[str, Any]:

@@ -214,7 +214,7 @@ def train(
     Each episode: reset, then repeat — act epsilon-greedily, step, update ``Q[s, a]`` toward its TD
     target — until the episode terminates or is truncated. With ``out``, the run writes its config,
     metadata, a per-episode ``progress.csv`` and ``checkpoint.pt`` there; if ``out`` already holds an
-    unfinished checkpoint of the same run, training resumes from it. Ctrl-C saves a checkpoint first.
+    unfinished checkpoint of the same run, training resumes from it. Ctrl-C stops at the end of the step, with a checkpoint.
     """
     check_budget(steps, seed)
     config = config or Config()
@@ -223,7 +223,7 @@ def train(
     rng = np.random.default_rng(seed)
     Q = np.zeros((n_states, n_actions))
     run = Run(config.method, env_id, config, steps, seed, out, progress, desc=f"{config.method} {env_id}",
-              close=(env,), episode_log=EPISODE_COLUMNS + ["epsilon"])
+              close=(env,), episode_log=EPISODE_COLUMNS + ["epsilon"], defer_interrupts=True)
     run.track(q=q_table(Q), rng=rng)
     step, episode = run.resume(step=0, episode=0)
     with run:
@@ -245,10 +245,10 @@ def train(
                 ep_return += float(r)
                 ep_len += 1
                 done = terminated or truncated
-                run.step_done(step, step - 1)
-            if done:
-                episode += 1
-                run.record_episode(step, ep_return, ep_len, epsilon=epsilon)
+                if done:  # before step_done: a checkpoint taken at this step counts this episode
+                    episode += 1
+                    run.record_episode(step, ep_return, ep_len, epsilon=epsilon)
+                run.step_done(step, step - 1, episode=episode)
     return Result(Q, run.episode_returns, run.episode_lengths, run.episode_end_steps, step)
 
 

@@ -2,8 +2,8 @@
 
 Each site is checked in Debian's Chromium exactly as `.ci/run` checks the book: served on 127.0.0.1, every other
 host blocked. A page with the book's own MathJax passes; the same page with MathJax from a CDN fails, as do
-broken images, links, anchors, requests and scripts. Chromium must be installed (`apt-get install chromium`;
-.ci/run installs it): without it these tests fail and say so, they are not skipped.
+broken images, links, anchors, requests and scripts. These tests need Chromium (`apt-get install chromium`, or
+CHROMIUM=/path/to/chrome; .ci/run installs it): without it they skip and say so, and under CI=true they fail.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from portable import skip_or_fail
 
 ROOT = Path(__file__).resolve().parent.parent
 CDN_MATHJAX = "https://cdn.jsdelivr.net/npm/mathjax@3/es5/tex-mml-chtml.js"
@@ -30,12 +32,31 @@ def _load_checker():
 bc = _load_checker()
 
 
-@pytest.fixture(scope="module")
-def chromium() -> str:
+def chromium_or_skip() -> str:
+    """The Chromium the checker finds; without one, the test skips (fails under CI=true) and says what to install."""
     try:
         return bc.find_chromium()
     except SystemExit as missing:
-        pytest.fail(str(missing), pytrace=False)
+        skip_or_fail(f"{str(missing).split('. ')[0]}: apt-get install chromium, or set CHROMIUM=/path/to/chrome")
+
+
+@pytest.fixture(scope="module")
+def chromium() -> str:
+    return chromium_or_skip()
+
+
+def test_without_chromium_the_browser_tests_skip_and_say_what_to_install(monkeypatch):
+    monkeypatch.delenv("CI", raising=False)
+    monkeypatch.setenv("CHROMIUM", "/nonexistent")
+    with pytest.raises(pytest.skip.Exception, match=r"^Chromium not found at '/nonexistent': apt-get install chromium"):
+        chromium_or_skip()
+    monkeypatch.delenv("CHROMIUM")
+    monkeypatch.setenv("PATH", "/nonexistent")
+    with pytest.raises(pytest.skip.Exception, match=r"^No Chromium on this machine .*apt-get install chromium"):
+        chromium_or_skip()
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="apt-get install chromium"):
+        chromium_or_skip()
 
 
 @pytest.fixture(scope="module")

@@ -228,3 +228,16 @@ def test_dppo_refuses_bad_values_the_same_way(tmp_path, capsys):
         code = exc.code
     err = capsys.readouterr().err
     assert code == 2 and "--steps: expected an integer >= 1, got 0" in err and len(err.strip().splitlines()) == 1
+
+
+def test_evaluate_and_render_take_a_results_folder_with_its_policy(frozenlake_run, tmp_path):
+    from rlcore.experiments.runner import export_policy
+
+    seed_folder = tmp_path / "results" / "exp" / "variant" / "seed-0"  # as `experiments run` leaves it
+    export_policy(frozenlake_run / "checkpoint.pt", seed_folder / "policy.pt")
+    result = json.loads(rlcore("evaluate", seed_folder, "--episodes", "3").stdout.strip().splitlines()[-1])
+    assert result["algo"] == "q-learning" and result["episodes"] == 3
+    rlcore("render", seed_folder, "--out", tmp_path / "seed.gif", "--frames", "5")
+    assert (tmp_path / "seed.gif").read_bytes()[:6] == b"GIF89a"
+    proc = rlcore("evaluate", tmp_path, check=False)  # a folder with neither names both
+    assert proc.returncode == 2 and "checkpoint.pt" in proc.stderr and "policy.pt" in proc.stderr

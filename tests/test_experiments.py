@@ -352,3 +352,24 @@ def test_gap_and_spread_names_the_best_and_worst_arm_and_the_widest_spread():
     best, worst, gap, spread = ex.gap_and_spread({"a": np.array([1.0, 3.0]), "b": np.array([10.0, 10.0]),
                                                   "c": np.array([4.0, 8.0])})
     assert (best, worst, gap, spread) == ("b", "a", 8.0, 2.0)
+
+
+def test_a_live_stand_in_leaves_no_temporary_folder_behind(tiny, tmp_path, monkeypatch):
+    import gc
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    live = ex.load_or_train("tiny", "ql", fallback_steps=300, fallback_seeds=[5, 6], jobs=1, eval_points=2,
+                            results=tmp_path / "results")
+    assert live.source == "live" and len(live.seeds) == 2
+    [folder] = list((tmp_path / "tmp").iterdir())
+    assert not (folder / "runs").exists()  # the checkpoints (a replay memory, say) go at once
+    assert live.seeds[0].policy(0) in range(4) and (live.seeds[1].folder / "policy.pt").exists()  # still usable
+    seed = live.seeds[1]
+    del live
+    gc.collect()
+    assert (seed.folder / "policy.pt").exists()  # a seed kept by the page keeps its files
+    del seed
+    gc.collect()
+    assert list((tmp_path / "tmp").iterdir()) == []  # and the folder goes with the last of them

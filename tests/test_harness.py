@@ -181,8 +181,89 @@ def test_deferred_ctrl_c_stops_at_the_end_of_the_step_and_a_second_one_stops_at_
                         step += 1
                         run.step_done(step, step - 1)
             assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-            assert load_checkpoint(tmp_path / f"p{presses}" / "checkpoint.pt")["step"] == stopped_at
-            # one press: the fourth step ran to its end; two: it stopped where it was
-            assert where == ["start", "end"] * 4 if presses == 1 else where[-1] == "start"
+            # one press: the fourth step ran to its end, and its checkpoint was written; two: it stopped where it
+            # was, and wrote nothing (there was no checkpoint yet)
+            if presses == 1:
+                assert load_checkpoint(tmp_path / "p1" / "checkpoint.pt")["step"] == stopped_at
+                assert where == ["start", "end"] * 4
+            else:
+                assert where[-1] == "start" and not (tmp_path / "p2" / "checkpoint.pt").exists()
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def test_a_checkpoint_without_a_tracked_key_is_refused_in_one_line(tmp_path):
+    from rlcore.checkpoint import save_checkpoint
+
+    toy_run(tmp_path, steps=10, target=20)  # an unfinished run, as a resume finds it
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
+    del ckpt["opt"]  # say, a replay memory the checkpoint was written without
+    save_checkpoint(tmp_path / "checkpoint.pt", {k: v for k, v in ckpt.items() if k not in ("format", "format_version")})
+    with pytest.raises(ValueError) as err:
+        toy_run(tmp_path, steps=10, target=20)
+    message = str(err.value)
+    assert "\n" not in message and "'opt'" in message and "another --out folder" in message
+
+
+def test_the_loaded_checkpoint_is_released_once_the_run_is_resumed(tmp_path):
+    import gc
+    import weakref
+
+    toy_run(tmp_path, steps=5, target=10)
+    run = Run("toy", "Toy-v0", ToyConfig(), 5, 0, tmp_path, desc="toy")
+    net = torch.nn.Linear(1, 1)
+    run.track(net=net)
+    weight = weakref.ref(run.ckpt["net"]["weight"])  # one of the checkpoint's tensors, copied into net on resume
+    assert run.resume(step=0) == 5
+    gc.collect()
+    assert weight() is None, "the run still holds the loaded checkpoint"
+    with run:
+        pass
+
+
+def test_a_second_ctrl_c_in_the_middle_of_a_step_leaves_no_checkpoint_that_mixes_two_steps(tmp_path):
+    import os
+    import signal
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        net = torch.nn.Linear(1, 1)
+        run = Run("toy", "Toy-v0", ToyConfig(checkpoint_every=2), 10, 0, tmp_path, desc="toy", defer_interrupts=True)
+        run.track(net=net)
+        step = run.resume(step=0)
+        with pytest.raises(KeyboardInterrupt):
+            with run:
+                while step < 10:
+                    with torch.no_grad():
+                        net.weight.fill_(step + 1.0)  # the step's first half: the weight is the step's number
+                    if step == 3:  # Ctrl-C twice in the middle of the fourth step: stop at once
+                        os.kill(os.getpid(), signal.SIGINT)
+                        os.kill(os.getpid(), signal.SIGINT)
+                    step += 1
+                    run.step_done(step, step - 1)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
+    assert ckpt["net"]["weight"].item() == ckpt["step"] == 2  # the last whole step's checkpoint, not a mix
+
+
+def test_a_ctrl_c_during_a_checkpoint_write_waits_for_the_write(tmp_path, monkeypatch):
+    import os
+    import signal
+
+    real = harness.save_checkpoint
+
+    def interrupted_save(path, state):  # Ctrl-C (or SIGTERM) arrives while the file is being written
+        os.kill(os.getpid(), signal.SIGINT)
+        real(path, state)
+
+    monkeypatch.setattr(harness, "save_checkpoint", interrupted_save)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            toy_run(tmp_path, steps=10)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
+    assert ckpt["step"] == 5 and not ckpt["complete"]  # the first periodic checkpoint was written whole, then it stopped
+    assert read_csv(tmp_path / "progress.csv")["step"].tolist() == [3]

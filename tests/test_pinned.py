@@ -13,7 +13,9 @@ and says so in its commit; on another CPU, with the code unchanged since the las
 
     python tests/test_pinned.py --add-platform    # keeps the pins recorded elsewhere, adds this CPU's
 
-The pins are for this machine kind's CPU build of PyTorch (one thread).
+The pins are for this machine kind's CPU build of PyTorch (one thread). On a CPU, or with kernels
+(``MKL_ENABLE_INSTRUCTIONS``, ``ATEN_CPU_CAPABILITY``), that recorded none, the pinned runs skip and say how to
+record them (``--add-platform``); under ``CI=true`` they fail instead (:func:`portable.skip_or_fail`).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import numpy as np
 import pytest
 import torch
 
+from portable import skip_or_fail
 from rlcore.runs import cpu_model
 
 PINS = Path(__file__).parent / "data" / "pinned.json"
@@ -74,14 +77,40 @@ def recorded() -> dict[str, dict]:
     return json.loads(PINS.read_text())["platforms"]
 
 
+def this_cpus_pins() -> dict[str, dict]:
+    """The pins recorded on this CPU with these kernels; where there are none, the test skips (fails on CI)."""
+    platforms, here = recorded(), cpu_model()
+    if here not in platforms:
+        skip_or_fail(f"no pins recorded for this CPU ({here}; recorded: {'; '.join(platforms)}); record them with "
+                     "`python tests/test_pinned.py --add-platform` on an unchanged checkout")
+    return platforms[here]
+
+
 @pytest.mark.parametrize("name", list(RUNS))
 def test_default_training_is_unchanged(name, tmp_path):
-    platforms = recorded()
+    pins = this_cpus_pins()[name]
     got = fingerprint(name, tmp_path)
-    matches = [p for p, pins in platforms.items() if pins[name] == got]
-    assert matches, (f"{name}: the run reproduces the pins of none of the {len(platforms)} recorded CPUs "
-                     f"({'; '.join(platforms)}); this one is {cpu_model()}. A change to training re-records with "
-                     f"`python tests/test_pinned.py --record`")
+    assert got == pins, (f"{name}: the run does not reproduce the pins recorded on this CPU ({cpu_model()}). "
+                         "A change to training re-records with `python tests/test_pinned.py --record`")
+
+
+def test_a_cpu_without_pins_skips_and_says_how_to_record(monkeypatch):
+    import test_pinned
+
+    monkeypatch.delenv("CI", raising=False)
+    monkeypatch.setattr(test_pinned, "cpu_model", lambda: "AcmeCPU Laptop (DEFAULT)")
+    with pytest.raises(pytest.skip.Exception, match=r"AcmeCPU.*python tests/test_pinned.py --add-platform"):
+        this_cpus_pins()
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="AcmeCPU"):
+        this_cpus_pins()
+
+
+def test_kernels_chosen_by_the_environment_are_part_of_the_cpu(monkeypatch):
+    monkeypatch.delenv("MKL_ENABLE_INSTRUCTIONS", raising=False)
+    default = cpu_model()
+    monkeypatch.setenv("MKL_ENABLE_INSTRUCTIONS", "AVX2")
+    assert cpu_model() == default[:-1] + ", MKL_ENABLE_INSTRUCTIONS=AVX2)"
 
 
 def test_every_platform_pins_every_run():

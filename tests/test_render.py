@@ -1,16 +1,36 @@
 import io
+import os
+import subprocess
+import sys
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from rlcore import gl
-from rlcore.render import (HeadlessGLError, env_dt, frames_to_gif, render_gif, rollout_frames, select_gl_backend,
-                           simulated_seconds)
+from portable import skip_or_fail
+from rlcore import gl, render
+from rlcore.render import (HeadlessGLError, env_dt, frames_to_gif, realtime_gif, render_gif, rollout_frames,
+                           select_gl_backend, simulated_seconds)
 
 
-def test_no_working_backend_names_what_to_install(monkeypatch):
-    monkeypatch.setattr(gl, "probe_gl_backend", lambda backend: (False, "cannot open display"))
+@pytest.fixture
+def fake_system(monkeypatch):
+    """``fake_system("Darwin")``: rlcore.gl sees that system, no backend chosen yet, ``MUJOCO_GL`` unset; returns
+    the list of backends probed (each probe fails)."""
+    def fake(system: str) -> list[str]:
+        probed: list[str] = []
+        monkeypatch.setattr(gl.platform, "system", lambda: system)
+        monkeypatch.setattr(gl, "_selected", None)
+        monkeypatch.setattr(gl, "_set_aside", None)
+        monkeypatch.delenv("MUJOCO_GL", raising=False)
+        monkeypatch.setattr(gl, "probe_gl_backend", lambda b: (probed.append(b), (False, "cannot open display"))[1])
+        return probed
+
+    return fake
+
+
+def test_no_working_backend_names_what_to_install(monkeypatch, fake_system):
+    fake_system("Linux")
     with pytest.raises(HeadlessGLError) as err:
         select_gl_backend(["egl", "osmesa"])
     msg = str(err.value)
@@ -81,8 +101,76 @@ def test_toy_text_rollout_follows_the_policy():
     assert not np.array_equal(frames[0], frames[1])  # the elf moved right
 
 
+@pytest.mark.parametrize("system, backends", [("Linux", ["egl", "osmesa"]), ("Darwin", ["glfw"]),
+                                             ("Windows", ["glfw"])])
+def test_each_system_tries_the_backends_mujoco_and_gymnasium_open_there(fake_system, system, backends):
+    probed = fake_system(system)
+    assert list(gl.platform_backends()) == backends
+    with pytest.raises(HeadlessGLError) as err:
+        select_gl_backend()
+    assert probed == backends
+    if system == "Linux":
+        assert "apt-get install" in str(err.value)
+    else:  # no apt-get on a Mac: GLFW needs a desktop session
+        assert "desktop session" in str(err.value) and "apt-get" not in str(err.value)
+
+
+def test_on_macos_glfw_is_chosen_and_cgl_is_refused_for_gymnasium(fake_system, monkeypatch):
+    fake_system("Darwin")
+    monkeypatch.setattr(gl, "probe_gl_backend", lambda b: (b == "glfw", "nope"))
+    monkeypatch.setattr(gl, "_use_backend", lambda b: None)
+    assert select_gl_backend() == "glfw"
+    monkeypatch.setenv("MUJOCO_GL", "cgl")  # MuJoCo's own macOS backend, which Gymnasium's renderer cannot open
+    with pytest.raises(HeadlessGLError, match="MUJOCO_GL=cgl: Gymnasium's renderer opens only egl, osmesa, glfw"):
+        select_gl_backend()
+
+
+def test_an_unknown_mujoco_gl_is_set_aside_before_mujoco_is_imported(fake_system, monkeypatch):
+    fake_system("Darwin")
+    monkeypatch.setenv("MUJOCO_GL", "egl")  # Linux only: `import mujoco` would raise on a Mac
+    monkeypatch.delitem(sys.modules, "mujoco", raising=False)
+    assert gl.set_aside_unknown_backend() == "egl"
+    assert os.environ["MUJOCO_GL"] == "disable"
+    with pytest.raises(HeadlessGLError, match=r"(?s)MUJOCO_GL=egl: not a backend MuJoCo knows on Darwin.*unset MUJOCO_GL"):
+        select_gl_backend()
+    for known in ("glfw", "cgl", "", "disable"):
+        monkeypatch.setenv("MUJOCO_GL", known)
+        assert gl.set_aside_unknown_backend() is None and os.environ["MUJOCO_GL"] == known
+
+
+def test_with_an_unknown_mujoco_gl_mujoco_still_simulates_and_a_clip_says_why_it_is_a_still():
+    code = ("from rlcore.envs import make_env; from rlcore.render import realtime_gif\n"
+            "env = make_env('Hopper-v5', seed=0); env.reset(seed=0); env.step(env.action_space.sample())\n"
+            "clip = realtime_gif('Hopper-v5', seconds=0.1)\n"
+            "assert clip.gif[:6] == b'GIF89a' and clip.missing, clip\n"
+            "print(clip.caption())")
+    proc = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, MUJOCO_GL="no-such-backend"),
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "not rendered on this machine" in proc.stdout and "unset MUJOCO_GL" in proc.stdout, proc.stdout
+
+
+def test_without_opengl_a_clip_is_a_still_that_says_why(monkeypatch):
+    def no_gl(*args, **kwargs):
+        raise HeadlessGLError(gl._no_backend_message({"egl": "no libEGL", "osmesa": "no libOSMesa"}, "Linux"))
+
+    monkeypatch.setattr(render, "render_gif", no_gl)
+    clip = realtime_gif("Hopper-v5", seconds=0.5, width=160, height=120)
+    assert clip.gif[:6] == b"GIF89a" and len(clip.gif) < 50_000
+    assert iio.imread(io.BytesIO(clip.gif), extension=".gif", index=None).shape[1:3] == (120, 160)
+    assert clip.missing == ("no OpenGL backend works (MUJOCO_GL=egl: no libEGL; MUJOCO_GL=osmesa: no libOSMesa). "
+                            "To fix it: sudo apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri then MUJOCO_GL=egl")
+    assert clip.caption().startswith("not rendered on this machine") and clip.missing in clip.caption()
+    assert abs(clip.seconds - 0.5) <= clip.frame_skip * clip.step_seconds / 2 + 1e-9  # what the clip would have shown
+    with pytest.raises(HeadlessGLError):  # the command line's render says so rather than write a still
+        render.render_gif("Hopper-v5")
+
+
 def test_mujoco_renders_offscreen_to_a_gif(tmp_path):
-    select_gl_backend()  # a real backend must work on the test machine (CI installs Mesa EGL)
+    try:
+        select_gl_backend()  # a real backend must work on CI (which installs Mesa EGL)
+    except HeadlessGLError as err:
+        skip_or_fail(f"MuJoCo cannot render here ({render.no_gl_reason(err)})")
     out = tmp_path / "hopper.gif"
     data = render_gif("Hopper-v5", max_frames=6, width=96, height=64, path=out, frame_skip=2)
     assert out.read_bytes() == data

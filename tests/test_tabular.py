@@ -105,24 +105,31 @@ def test_run_folder_contents_and_resume(tmp_path):
         train("FrozenLake-v1", Config(method="sarsa"), steps=10, seed=1, out=out)
 
 
-def test_interrupt_saves_a_checkpoint(tmp_path, monkeypatch):
+def test_ctrl_c_stops_at_the_end_of_the_step_with_a_checkpoint(tmp_path, monkeypatch):
+    import os
+    import signal
+
     import rlcore.tabular as tab
 
     calls = {"n": 0}
     real = tab.q_learning_update
 
-    def interrupting(*args, **kwargs):
+    def interrupting(*args, **kwargs):  # Ctrl-C in the middle of step 1234, before its update
         calls["n"] += 1
         if calls["n"] == 1234:
-            raise KeyboardInterrupt
+            os.kill(os.getpid(), signal.SIGINT)
         return real(*args, **kwargs)
 
     monkeypatch.setattr(tab, "q_learning_update", interrupting)
-    with pytest.raises(KeyboardInterrupt):
-        train("FrozenLake-v1", Config(checkpoint_every=10_000), steps=5_000, seed=0, out=tmp_path)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            train("FrozenLake-v1", Config(checkpoint_every=10_000), steps=5_000, seed=0, out=tmp_path)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
-    # the checkpoint counts the steps completed: the 1234th update never ran, so step 1234 is redone on resume
-    assert ckpt["step"] == 1233 and not ckpt["complete"]
+    # the step Ctrl-C came in ran to its end, update included: the checkpoint is between two steps
+    assert ckpt["step"] == 1234 and not ckpt["complete"] and calls["n"] == 1234
 
 
 def test_non_tabular_env_is_a_clear_error():
@@ -174,3 +181,22 @@ def test_grid_map_reads_the_cliff_from_the_transitions():
     assert (cliff[3, 1:11] == "C").all() and (cliff[:3] == "F").all()
     lake = grid_map("FrozenLake-v1")
     assert lake[0, 0] == "S" and lake[3, 3] == "G" and (lake == "H").sum() == 4
+
+
+def test_a_run_resumed_from_a_checkpoint_at_an_episodes_last_step_is_the_uninterrupted_run(
+        tmp_path, interrupt_at_first_checkpoint):
+    import rlcore.tabular as tab
+
+    config = dict(env_kwargs={"is_slippery": True})
+    whole = train("FrozenLake-v1", Config(**config), steps=600, seed=3, out=tmp_path / "whole")
+    end = int(whole.episode_end_steps[2])  # the third episode's last step
+    interrupt_at_first_checkpoint(tab)
+    with pytest.raises(KeyboardInterrupt):
+        train("FrozenLake-v1", Config(checkpoint_every=end, **config), steps=600, seed=3, out=tmp_path / "cut")
+    ckpt = load_checkpoint(tmp_path / "cut" / "checkpoint.pt")
+    assert ckpt["step"] == end and ckpt["episode"] == 3  # the episode that ended at the checkpoint's step counts
+    again = train("FrozenLake-v1", Config(checkpoint_every=end, **config), steps=600, seed=3, out=tmp_path / "cut")
+    np.testing.assert_array_equal(again.Q, whole.Q)
+    logs = [read_csv(tmp_path / name / "progress.csv") for name in ("whole", "cut")]
+    for column in ("episode", "step", "episode_return"):
+        assert logs[1][column].tolist() == logs[0][column].tolist(), column  # every episode once, as uninterrupted

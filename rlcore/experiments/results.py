@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import tempfile
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,6 +18,15 @@ import numpy as np
 from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, get_experiment, run_paths
 from rlcore.experiments.runner import SNAPSHOT, SNAPSHOT_POLICY, _train_all, config_class
 from rlcore.logger import read_csv
+
+
+class TemporaryFolder:
+    """A new temporary folder (``path``), removed with everything in it when this object is garbage-collected or
+    the process ends, whichever comes first (quietly, unlike ``tempfile.TemporaryDirectory``)."""
+
+    def __init__(self, prefix: str):
+        self.path = Path(tempfile.mkdtemp(prefix=prefix))
+        weakref.finalize(self, shutil.rmtree, self.path, ignore_errors=True)
 
 
 @dataclass
@@ -32,6 +43,8 @@ class SeedResult:
     snapshot: dict[str, Any] | None = None
     """For a seed still training: the step its logs reach, its budget, and who took the snapshot when."""
     _policy: Any = field(default=None, repr=False)
+    _keep: Any = field(default=None, repr=False, compare=False)
+    """A live stand-in's :class:`TemporaryFolder`: the folder goes when the last seed holding it does."""
 
     @property
     def episode_end_steps(self) -> np.ndarray:
@@ -118,7 +131,8 @@ def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list
 
     The stand-in has the same settings with ``fallback_steps`` steps per seed (evaluated ``eval_points``
     times), trains ``fallback_seeds`` in ``jobs`` processes into a temporary folder, and is returned
-    with ``source="live"`` so that a page can say what it shows.
+    with ``source="live"`` so that a page can say what it shows. The folder's run checkpoints are removed at once;
+    its results (policies, logs) go when no seed of the stand-in is referenced any more, or when the process ends.
     """
     found = _read_run(name, next(r for r in get_experiment(name).runs if r.name == run), results)
     if found.seeds:
@@ -128,9 +142,15 @@ def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list
     if "eval_every" in config_class(spec.algo).__dataclass_fields__:
         overrides["eval_every"] = max(fallback_steps // eval_points, 1)
     live = dataclasses.replace(spec, steps=fallback_steps, seeds=tuple(fallback_seeds), overrides=overrides)
-    tmp = Path(tempfile.mkdtemp(prefix=f"rlcore-live-{name}-"))
-    _train_all(name, [(live, s) for s in live.seeds], jobs, tmp / "results", tmp / "runs", progress=False)
+    keep = TemporaryFolder(f"rlcore-live-{name}-")
+    tmp = keep.path
+    try:
+        _train_all(name, [(live, s) for s in live.seeds], jobs, tmp / "results", tmp / "runs", progress=False)
+    finally:
+        shutil.rmtree(tmp / "runs", ignore_errors=True)
     out = _read_run(name, live, tmp / "results")
+    for seed in out.seeds:
+        seed._keep = keep
     return RunResults(live, out.seeds, list(spec.seeds), source="live")
 
 
