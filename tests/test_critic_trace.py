@@ -101,3 +101,23 @@ def test_overestimation_is_the_mean_target_over_what_the_mean_reward_is_worth_fo
     assert critic_trace.first_runaway(seed, 0.99) == 1001
     assert critic_trace.first_runaway(seed, 0.99, factor=5) == 501
     assert critic_trace.first_runaway(seed, 0.99, factor=1_000) is None
+
+
+def test_td3_on_a_ddpg_run_takes_every_setting_of_the_run_and_ddpg_s_noise():
+    from rlcore import td3
+    from rlcore.experiments.critic_trace import settings_for
+    from rlcore.experiments.runner import chosen_runs
+
+    spec = chosen_runs("ddpg-modern-1m", ["humanoid"])[0]
+    settings = settings_for("td3", spec)
+    plain = ddpg.make_config("ddpg", **spec.overrides)
+    config = td3.Config(**settings)
+    for name in ("hidden", "actor_lr", "critic_lr", "batch_size", "learning_starts", "normalize_obs", "tau", "gamma",
+                 "buffer_size", "eval_every"):
+        assert getattr(config, name) == getattr(plain, name), name
+    assert config.exploration_noise == plain.noise_sigma
+    assert config.clipped_double_q and config.policy_delay == 2  # TD3's devices stay on unless switched off
+    assert settings_for("ddpg", spec) == dict(spec.overrides)
+    report = chosen_runs("ddpg-report", ["hopper"])[0]  # decaying noise: TD3 cannot take it over, and says so
+    with pytest.raises(ValueError, match="constant Gaussian noise"):
+        settings_for("td3", report)

@@ -373,3 +373,19 @@ def test_a_live_stand_in_leaves_no_temporary_folder_behind(tiny, tmp_path, monke
     del seed
     gc.collect()
     assert list((tmp_path / "tmp").iterdir()) == []  # and the folder goes with the last of them
+
+
+def test_td3_and_sac_experiments_compare_like_with_like():
+    from rlcore.experiments import get_experiment
+
+    runs = {r.name: r for r in get_experiment("td3-sac-1m").runs}
+    assert set(runs) == {f"{a}-{t}" for a in ("td3", "sac") for t in ("humanoid", "hopper", "halfcheetah")}
+    ddpg_humanoid = get_experiment("ddpg-modern-1m").runs[1]
+    for name, run in runs.items():
+        assert run.steps == 1_000_000 and run.seeds == (0, 1, 2)
+        assert run.overrides["hidden"] == (256, 256) and run.overrides["batch_size"] == 256
+        assert run.overrides.get("normalize_obs", False) == (run.env_id == "Humanoid-v5")  # as DDPG's Humanoid run
+        assert run.overrides["eval_every"] == ddpg_humanoid.overrides["eval_every"]       # the same evaluations
+    ablation = {r.name: r for r in get_experiment("td3-ablation").runs}
+    assert {r.env_id for r in ablation.values()} == {"Hopper-v5"} and all(len(r.seeds) == 5 for r in ablation.values())
+    assert ablation["none"].overrides["policy_delay"] == 1 and not ablation["none"].overrides["clipped_double_q"]
