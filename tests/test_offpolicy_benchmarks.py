@@ -90,7 +90,7 @@ def test_an_rlcore_run_says_where_its_time_went_and_puts_everything_back(versus,
     cfg = {**versus.settings(algo, 20), "hidden": [8, 8], "batch_size": 8, "buffer_size": 100}
     seconds = versus.rlcore_run("Pendulum-v1", 30, 0, cfg)
     split = versus.SPLITS["rlcore"][-1]
-    assert split["seconds_total"] == seconds and split["learning_steps"] == 11
+    assert split["seconds_total"] == seconds and split["learning_steps"] == 11 and 0 < split["cpu_seconds_total"]
     parts = ("networks", "simulator", "acting", "replay_sampling", "rest")
     assert sum(split[f"share_{k}"] for k in parts) == pytest.approx(1.0)
     assert all(split[f"seconds_{k}"] > 0 for k in parts[:4])
