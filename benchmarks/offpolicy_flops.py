@@ -57,6 +57,7 @@ from typing import Any
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # this checkout's rlcore, not an installed one
 from record import provenance, write_record  # noqa: E402
 
 TASKS = {"HalfCheetah-v5": (17, 6), "Humanoid-v5": (348, 17)}

@@ -79,6 +79,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # this checkout's rlcore, not an installed one
 from record import provenance, throughput, throughput_summary, time_side_by_side, write_record  # noqa: E402
 
 ALGOS = ("td3", "sac")
