@@ -23,18 +23,20 @@ with batch 256 and two hidden layers of 256 (the settings of ``benchmarks/offpol
    as they run, forward and backward) on real updates: rlcore's own ``learn`` of that algorithm, captured from a
    short training run (:func:`capture_learn`), two consecutive steps for TD3 (one with the actor, one without).
 
-3. **Time and peak**, all measured here in this process with one torch thread, each as the best of several rounds
-   (the machine is shared; the best round is the one least disturbed): the seconds of one real update (the
-   captured ``learn`` on a fixed minibatch), the core's float32 peak (a 2048 x 2048 by 2048 x 2048 product, about 17
-   GFLOP, at the start and at the end; the better counts), and the same product at the update's own scale (256 x 256
-   by 256 x 256).
+3. **Time and peak**, all measured here in this process with one torch thread, in seconds of the process's CPU time
+   (``time.process_time``: on a machine shared with other jobs, the time spent waiting for the core does not count),
+   each the best of many short rounds: the seconds of one real update (the captured ``learn`` on a fixed
+   minibatch), the core's float32 peak (the best single n x n by n x n product for n = 1024 and 2048, at the start and
+   at the end), and the same product at the update's own scale (256 x 256 by 256 x 256).
 
 4. **Where the rest goes** (:func:`kernel_split`): every ATen operation of one update is recorded (shapes, strides,
-   arguments) with a ``TorchDispatchMode`` and replayed on copies of its arguments, without autograd or Python
-   around it, in three groups: the matrix products, Adam's (fused) kernels, and all other kernels (elementwise,
+   arguments) with a ``TorchDispatchMode`` and replayed on copies of its arguments, from a plain loop without
+   autograd, in three groups: the matrix products, Adam's (fused) kernels, and all other kernels (elementwise,
    reductions, random numbers, copies, the soft target updates). The groups and the real update are timed in turns,
    round after round. What the update takes beyond the three groups is the framework's overhead (Python, building
-   and walking the autograd graph, the dispatcher).
+   and walking the autograd graph). Each replayed operation still pays its own dispatch (a few microseconds: the
+   record keeps what one that computes nothing, a view, costs), so the "other kernels" are their arithmetic and
+   their per-operation cost together; ``other_by_op`` names the costliest, each replayed alone.
 
 The record goes to ``results/benchmarks/offpolicy-flops.json``. Issue 34 put the updates at "TD3 about 0.43 GFLOP on
 HalfCheetah and 0.86 on Humanoid, SAC 0.66 and 1.33": that is the count with the critics' weight gradients in the
@@ -67,7 +69,16 @@ ISSUE_GFLOP = {("td3", "HalfCheetah-v5"): 0.43, ("td3", "Humanoid-v5"): 0.86,
                ("sac", "HalfCheetah-v5"): 0.66, ("sac", "Humanoid-v5"): 1.33}
 """Issue 34's count, to verify."""
 
+PEAK_ROUNDS = {1024: 40, 2048: 12}
+"""The core's peak: an n x n by n x n float32 product for each n, one product per round, the best of this many rounds
+(at the start and at the end of the script)."""
+
 MATMULS = ("mm", "addmm", "bmm", "baddbmm")
+
+VIEWS = ("detach", "t", "view", "_unsafe_view", "expand", "transpose", "permute", "squeeze", "unsqueeze", "alias",
+         "as_strided", "slice", "select", "_record_function_enter_new", "_record_function_exit")
+"""Operations among the "other" ones that compute nothing (views, profiler markers): what replaying one of them
+costs is the floor any single operation pays, the dispatch."""
 """The ATen operations that are matrix products here (by their name without overload)."""
 
 
@@ -197,16 +208,17 @@ def best_seconds(fn: Callable[[], None], calls: int, rounds: int) -> float:
 def interleaved_best(fns: dict[str, tuple[Callable[[], None], int]], rounds: int) -> dict[str, float]:
     """For each name -> (fn, calls): the best over ``rounds`` of the mean seconds of one of ``calls`` calls, the
     functions taking turns within each round (so that a change in the machine's load falls on all of them); one
-    warm-up call each first."""
+    warm-up call each first. Seconds of CPU time of this process (``time.process_time``): time spent waiting for
+    the core while other jobs run does not count."""
     for fn, _ in fns.values():
         fn()
     best = {name: float("inf") for name in fns}
     for _ in range(rounds):
         for name, (fn, calls) in fns.items():
-            t = time.perf_counter()
+            t = time.process_time()
             for _ in range(calls):
                 fn()
-            best[name] = min(best[name], (time.perf_counter() - t) / calls)
+            best[name] = min(best[name], (time.process_time() - t) / calls)
     return best
 
 
@@ -271,11 +283,10 @@ def op_kind(func: Any) -> str:
 
 
 def kernel_groups(learn: Callable[[int, Any], None], minibatch: Any,
-                  steps: Sequence[int] = (2, 3)) -> tuple[dict[str, Callable[[], None]], dict[str, float]]:
+                  steps: Sequence[int] = (2, 3)) -> tuple[dict[str, list], int]:
     """The ATen operations of the updates at ``steps`` (TD3: one with the actor, one without), recorded and set up
-    for replay on copies of their arguments, without autograd: a call per group (``matmul``, ``adam``, ``other``)
-    that replays that group's operations once per update, and how many operations there were per update (and how
-    many could not be replayed; they are left out)."""
+    for replay on copies of their arguments: (func, args, kwargs) by group (``matmul``, ``adam``, ``other``), and how
+    many could not be replayed (they are left out)."""
     ops = []
     for step in steps:
         ops += record_ops(lambda: learn(step, minibatch))
@@ -290,32 +301,45 @@ def kernel_groups(learn: Callable[[int, Any], None], minibatch: Any,
                 failed += 1
                 continue
             groups[op_kind(func)].append((func, args, kwargs))
-
-    def replay(group: list) -> Callable[[], None]:
-        def run() -> None:
-            with torch.no_grad():
-                for func, args, kwargs in group:
-                    func(*args, **kwargs)
-        return run
-    counts = {**{f"ops_{k}": len(g) / len(steps) for k, g in groups.items()}, "ops_not_replayed": failed / len(steps)}
-    return {k: replay(g) for k, g in groups.items()}, counts
+    return groups, failed
 
 
-def kernel_split(learn: Callable[[int, Any], None], minibatch: Any, rounds: int = 5,
-                 calls: int = 20) -> dict[str, float]:
+def replay(ops: list) -> Callable[[], None]:
+    """A call that runs ``ops`` (func, args, kwargs) once each, without autograd."""
+    def run() -> None:
+        with torch.no_grad():
+            for func, args, kwargs in ops:
+                func(*args, **kwargs)
+    return run
+
+
+def kernel_split(learn: Callable[[int, Any], None], minibatch: Any, rounds: int = 5, calls: int = 20,
+                 top: int = 8) -> dict[str, Any]:
     """Seconds of one real update (``seconds_update``) and, timed in turns with it, of its matrix products, Adam's
     kernels and all other kernels, each replayed on its own (:func:`kernel_groups`), per update; the overhead is
-    what the update takes beyond the three (Python, autograd, the dispatcher)."""
+    what the update takes beyond the three (Python, autograd, the dispatcher). ``other_by_op``: the ``top`` other
+    operations by their replayed seconds per update (each name's calls added up)."""
     steps = (2, 3)
-    groups, counts = kernel_groups(learn, minibatch, steps)
+    groups, failed = kernel_groups(learn, minibatch, steps)
     calls += calls % 2
     fns = {"update": (one_update(learn, minibatch), calls),
-           **{k: (fn, max(calls // len(steps), 1)) for k, fn in groups.items()}}
+           **{k: (replay(ops), max(calls // len(steps), 1)) for k, ops in groups.items()}}
     best = interleaved_best(fns, rounds)
     seconds = {"update": best["update"], **{k: best[k] / len(steps) for k in groups}}
     seconds["overhead"] = seconds["update"] - sum(seconds[k] for k in groups)
+    by_op: dict[str, list[float]] = {}  # name -> [seconds per update, calls per update]
+    for func, args, kwargs in groups["other"]:
+        entry = by_op.setdefault(func._schema.name.split("::")[-1], [0.0, 0.0])
+        entry[0] += best_seconds(replay([(func, args, kwargs)]), 10, 3) / len(steps)
+        entry[1] += 1 / len(steps)
+    views = [v for name, v in by_op.items() if name in VIEWS]
     return {**{f"seconds_{k}": v for k, v in seconds.items()},
-            **{f"share_{k}": v / seconds["update"] for k, v in seconds.items() if k != "update"}, **counts}
+            **{f"share_{k}": v / seconds["update"] for k, v in seconds.items() if k != "update"},
+            **{f"ops_{k}": len(ops) / len(steps) for k, ops in groups.items()}, "ops_not_replayed": failed / len(steps),
+            "ops_views": sum(v[1] for v in views),
+            "seconds_per_view_op": sum(v[0] for v in views) / max(sum(v[1] for v in views), 1e-9),
+            "other_by_op": {name: {"seconds": v[0], "calls": v[1]}
+                            for name, v in sorted(by_op.items(), key=lambda kv: -kv[1][0])[:top]}}
 
 
 def measure(algo: str, env_id: str, rounds: int, calls: int, peak_gflops: float) -> dict[str, Any]:
@@ -356,30 +380,32 @@ def set_shares(row: dict[str, Any], peak_gflops: float) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--rounds", type=int, default=7, help="rounds of each timing; the best counts")
-    p.add_argument("--calls", type=int, default=40, help="updates per round")
+    p.add_argument("--rounds", type=int, default=30, help="rounds of each timing; the best counts")
+    p.add_argument("--calls", type=int, default=4, help="updates per round")
     p.add_argument("--out", default="results/benchmarks/offpolicy-flops.json")
     args = p.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(0)
     load_start = os.getloadavg()
 
-    peaks = [matmul_gflops(2048, 3, args.rounds)]
+    peaks = {n: [matmul_gflops(n, 1, PEAK_ROUNDS[n])] for n in PEAK_ROUNDS}
     rows = []
     for algo in ("td3", "sac"):
         for env_id in TASKS:
-            rows.append(measure(algo, env_id, args.rounds, args.calls, peaks[0]))
-    peaks.append(matmul_gflops(2048, 3, args.rounds))  # again at the end: the load may have changed
-    peak = max(peaks)
-    for row in rows:  # against the better of the two peak measurements
+            rows.append(measure(algo, env_id, args.rounds, args.calls, max(max(v) for v in peaks.values())))
+    for n in PEAK_ROUNDS:  # again at the end: the load may have changed
+        peaks[n].append(matmul_gflops(n, 1, PEAK_ROUNDS[n]))
+    peak = max(max(v) for v in peaks.values())
+    for row in rows:  # against the best peak measurement
         set_shares(row, peak)
-    small = matmul_gflops(256, 200, args.rounds)
+    small = matmul_gflops(256, 20, args.rounds)
     command = f"python benchmarks/offpolicy_flops.py --rounds {args.rounds} --calls {args.calls}"
     record = {
         "benchmark": "offpolicy-flops", "batch_size": 256, "hidden": [256, 256], "policy_delay": 2,
         "counting_rule": ("matrix products only, 2 m k n each; per layer 2 B k n forward, 2 B k n weight gradient "
                           "(unless frozen), 2 B k n input gradient (not into data); elementwise work left out"),
-        "peak_gflops": peak, "peak_gflops_measurements": peaks, "peak_matmul": "2048 x 2048 by 2048 x 2048, float32",
+        "peak_gflops": peak, "peak_gflops_measurements": {str(n): v for n, v in peaks.items()},
+        "peak_matmul": "n x n by n x n, float32, n in " + ", ".join(map(str, PEAK_ROUNDS)) + ": the best",
         "matmul_256_gflops": small, "matmul_256_share_of_peak": small / peak,
         "rows": rows, **provenance(command, load_start, peers=("stable_baselines3",) if _has_sb3() else ()),
     }
