@@ -60,7 +60,7 @@ What differs:
 
 CleanRL's single-file ``td3_continuous_action.py`` and ``sac_continuous_action.py`` are not run: its PyPI package
 (``cleanrl`` 1.2.0) requires Python < 3.11 and gym 0.23.1 (the old step API, without the ``-v5`` tasks), and the
-repository's current scripts, written for Gymnasium 0.29, read ``infos["final_observation"]``, which Gymnasium 1.x's
+repository's current scripts, written for Gymnasium before 1.0, read ``infos["final_observation"]``, which Gymnasium 1.x's
 vector environments no longer provide (its autoreset changed in 1.0), so they stop at the first time-limit
 truncation (step 1,000 on HalfCheetah) unless edited; they also need ``tyro``, TensorBoard and the repository's
 ``cleanrl_utils``. An edited copy would no longer be CleanRL's code, so the comparison is with SB3 alone.
