@@ -106,3 +106,10 @@ def test_an_sb3_run_with_the_same_settings(versus, algo):
     versus.sb3_run("Pendulum-v1", 30, 0, cfg)
     split = versus.SPLITS["sb3"][-1]
     assert split["learning_steps"] == 10 and split["seconds_networks"] > 0 and split["seconds_simulator"] > 0
+
+
+@pytest.mark.parametrize("algo", ["td3", "sac"])
+def test_sb3s_update_is_the_count_with_the_critics_weight_gradients(flops, algo):
+    pytest.importorskip("stable_baselines3")
+    hand = flops.update_flops(algo, 3, 1, hidden=(8, 8), batch=4, frozen_critics=False)["total"]
+    assert flops.sb3_counted_flops(algo, "Pendulum-v1", hidden=(8, 8), batch=4) == hand
