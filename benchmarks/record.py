@@ -12,17 +12,35 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 
+def cpu_model() -> str:
+    """The processor's model name as the operating system reports it (Linux's ``/proc/cpuinfo``; elsewhere
+    :func:`platform.processor`), with the vector extensions a float32 matrix product can use (AVX2, AVX-512)."""
+    name, flags = "", set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and not name:
+                name = value.strip()
+            elif key.strip() == "flags" and not flags:
+                flags = set(value.split())
+    except OSError:
+        pass
+    name = name or platform.processor() or platform.machine()
+    vector = [label for flag, label in (("avx2", "AVX2"), ("avx512f", "AVX-512")) if flag in flags]
+    return f"{name} ({', '.join(vector)})" if vector else name
+
+
 def provenance(command: str, load_start: Sequence[float] | None = None,
                peers: Sequence[str] = ()) -> dict[str, object]:
     """The command, the versions of what the numbers depend on (:func:`rlcore.runs.versions`, and of each package
-    in ``peers``, e.g. ``stable_baselines3``), the machine with torch's thread count and, from ``load_start`` on,
+    in ``peers``, e.g. ``stable_baselines3``), the machine (its CPU model, :func:`cpu_model`) with torch's thread count and, from ``load_start`` on,
     the load average before and now, and the commit."""
     import torch
 
     from rlcore.runs import git_commit, versions
 
     machine = {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-               "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads()}
+               "cpu_model": cpu_model(), "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads()}
     if load_start is not None:
         machine |= {"loadavg_start": list(load_start), "loadavg_end": list(os.getloadavg())}
     return {"command": command,

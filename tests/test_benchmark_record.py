@@ -11,6 +11,7 @@ def test_provenance_names_command_versions_machine_and_commit(script_module):
     assert {"python", "numpy", "torch", "gymnasium", "rlcore"} <= set(prov["versions"])
     assert prov["machine"]["loadavg_start"] == [0.5, 0.25, 0.125] and len(prov["machine"]["loadavg_end"]) == 3
     assert prov["machine"]["cpu_count"] >= 1 and prov["machine"]["torch_threads"] >= 1
+    assert prov["machine"]["cpu_model"] == record.cpu_model() and record.cpu_model().strip()
     assert "loadavg_start" not in record.provenance("x")["machine"]
 
 
@@ -41,7 +42,7 @@ def test_side_by_side_interleaves_the_runners_and_reports_the_median(script_modu
 
 
 @pytest.mark.parametrize("script", ["ddpg_vs_sb3", "ppo_vs_sb3", "dqn_vs_sb3", "ppo_returns_vs_sb3",
-                                    "checkpoint_cost", "humanoid_cost"])
+                                    "checkpoint_cost", "humanoid_cost", "offpolicy_vs_sb3", "offpolicy_flops"])
 def test_every_benchmark_writes_through_the_shared_record(script):
     from pathlib import Path
 
