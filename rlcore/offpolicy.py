@@ -205,7 +205,7 @@ class TwinCritic(nn.Module):
 
 class SeparateTwinCritics(nn.Module):
     """Q_1 and Q_2 as two :class:`Critic` s, one after the other: what :class:`TwinCritic` computes, for the benchmark
-    that measures what batching them buys (``benchmarks/twin_critic.py``) and the test that they agree."""
+    that measures what batching them buys (chapter 8's timing cell) and the test that they agree."""
 
     def __init__(self, obs_dim: int, act_dim: int, hidden, n: int = 2):
         super().__init__()
