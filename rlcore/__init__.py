@@ -21,7 +21,7 @@ One idea per module (see the design card in the README):
 - :mod:`rlcore.td3`        TD3: clipped double Q, target-policy smoothing, delayed updates
 - :mod:`rlcore.sac`        SAC: maximum entropy, a squashed Gaussian policy, automatic temperature
 - :mod:`rlcore.ppo`        PPO, clipped and adaptive-KL
-- :mod:`rlcore.experiments` the book's named, resumable full-budget experiments
+- :mod:`rlbook` the book's named, resumable full-budget experiments
 - :mod:`rlcore.algos`      the registry of algorithms the command line knows
 
 Modules are imported on demand (``import rlcore.envs``) so that ``import rlcore`` stays cheap.

@@ -316,7 +316,8 @@ class Minibatch:
 
 Probe = Callable[[int, Minibatch, nn.Module, Callable[[], torch.Tensor], float], None]
 """A diagnostic called before every learning step: ``probe(step, minibatch, critic, target, gamma)``, where
-``target()`` computes that step's critic targets y. It must only read (:mod:`rlcore.experiments.critic_trace`)."""
+``target()`` computes that step's critic targets y. It must only read, so that the run it watches
+is the run without it (the book's critic trace is one)."""
 
 
 class OffPolicyLoop:

@@ -160,14 +160,18 @@ def torch_threads() -> int:
 
 
 def command_line() -> str | None:
-    """How this process was started, as a user would type it (``python -m rlcore ...`` for the CLI)."""
+    """How this process was started, as a user would type it: ``python -m rlcore ...`` for a module of a package
+    (``python -m rlcore train ...``, ``python -m rlbook experiments run ...``), else the script's name."""
     if not sys.argv or not sys.argv[0]:
         return None
     prog = Path(sys.argv[0]).resolve()
-    package = Path(__file__).resolve().parent
-    if prog.is_relative_to(package):  # python -m rlcore, python -m rlcore.experiments.versus, ...
-        module = ".".join(("rlcore", *prog.relative_to(package).with_suffix("").parts))
-        head = ["python", "-m", module.removesuffix(".__main__")]
+    package = [prog.stem] if prog.suffix == ".py" else []
+    folder = prog.parent
+    while (folder / "__init__.py").is_file():  # a module inside a package: its dotted name
+        package.insert(0, folder.name)
+        folder = folder.parent
+    if len(package) > 1:
+        head = ["python", "-m", ".".join(package).removesuffix(".__main__")]
     else:
         head = [prog.name]
     return shlex.join([*head, *sys.argv[1:]])

@@ -10,7 +10,7 @@ from rlcore.checkpoint import load_checkpoint
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.nets import DuelingQNetwork, QNetwork, dueling_aggregate, mlp
-from rlcore.overestimation import LookupQ as Table  # fixed Q-values per observation id
+from rlbook.overestimation import LookupQ as Table  # fixed Q-values per observation id
 
 
 def test_dqn_target_by_hand():

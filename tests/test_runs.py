@@ -110,14 +110,18 @@ def test_budget_and_seed_are_checked_before_anything_is_written(tmp_path):
 def test_the_recorded_command_names_the_module_a_user_would_run(monkeypatch):
     from pathlib import Path
 
+    import rlbook
     import rlcore
     from rlcore.runs import command_line
 
     package = Path(rlcore.__file__).resolve().parent
     monkeypatch.setattr("sys.argv", [str(package / "__main__.py"), "train", "dqn"])
     assert command_line() == "python -m rlcore train dqn"
-    monkeypatch.setattr("sys.argv", [str(package / "experiments" / "versus.py"), "--arm", "a b"])
-    assert command_line() == "python -m rlcore.experiments.versus --arm 'a b'"
+    book = Path(rlbook.__file__).resolve().parent
+    monkeypatch.setattr("sys.argv", [str(book / "versus.py"), "--arm", "a b"])
+    assert command_line() == "python -m rlbook.versus --arm 'a b'"
+    monkeypatch.setattr("sys.argv", [str(book / "__main__.py"), "experiments", "run", "x"])
+    assert command_line() == "python -m rlbook experiments run x"
     monkeypatch.setattr("sys.argv", ["/somewhere/benchmarks/ppo_vs_sb3.py", "--steps", "10"])
     assert command_line() == "ppo_vs_sb3.py --steps 10"
 

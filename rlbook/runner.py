@@ -15,7 +15,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
-from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, _META_KEYS, get_experiment, run_paths
+from rlbook.registry import RESULTS_DIR, WORK_DIR, RunSpec, _META_KEYS, get_experiment, run_paths
 
 
 def export_policy(checkpoint: str | os.PathLike, dest: str | os.PathLike) -> int:

@@ -1,9 +1,9 @@
 """Full-budget experiments: the named, resumable runs whose outputs the book shows.
 
-    python -m rlcore experiments list
-    python -m rlcore experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
-    python -m rlcore experiments status dqn-cartpole
-    python -m rlcore experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
+    python -m rlbook experiments list
+    python -m rlbook experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
+    python -m rlbook experiments status dqn-cartpole
+    python -m rlbook experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
 
 Each run trains in a work folder (``runs/<experiment>/<run>/seed-<s>/``, not committed: it holds
 full checkpoints with replay memories) and, when it finishes, its small outputs are copied to
@@ -22,18 +22,18 @@ that the chapter can say so and fall back to a short live run.
 
 The package, one idea a module:
 
-- :mod:`rlcore.experiments.registry`: the named experiments (``RunSpec``, ``Experiment``, ``EXPERIMENTS``);
-- :mod:`rlcore.experiments.runner`: training them, one process per core, resumable;
-- :mod:`rlcore.experiments.results`: reading ``results/`` (or a short live stand-in) and its provenance;
-- :mod:`rlcore.experiments.analysis`: the statistics and tables the chapters quote;
-- :mod:`rlcore.experiments.pages`: an experiment's runs as a page loads, labels and describes them.
+- :mod:`rlbook.registry`: the named experiments (``RunSpec``, ``Experiment``, ``EXPERIMENTS``);
+- :mod:`rlbook.runner`: training them, one process per core, resumable;
+- :mod:`rlbook.results`: reading ``results/`` (or a short live stand-in) and its provenance;
+- :mod:`rlbook.analysis`: the statistics and tables the chapters quote;
+- :mod:`rlbook.pages`: an experiment's runs as a page loads, labels and describes them.
 
-Everything is importable from ``rlcore.experiments`` itself.
+Everything is importable from ``rlbook`` itself.
 """
 
 from __future__ import annotations
 
-from rlcore.experiments.registry import (  # noqa: F401
+from rlbook.registry import (  # noqa: F401
     REPO_ROOT,
     RESULTS_DIR,
     WORK_DIR,
@@ -52,7 +52,7 @@ from rlcore.experiments.registry import (  # noqa: F401
     get_experiment,
     run_paths,
 )
-from rlcore.experiments.runner import (  # noqa: F401
+from rlbook.runner import (  # noqa: F401
     chosen_runs,
     config_class,
     distributed_command,
@@ -66,7 +66,7 @@ from rlcore.experiments.runner import (  # noqa: F401
     schedule,
     run_experiment,
 )
-from rlcore.experiments.results import (  # noqa: F401
+from rlbook.results import (  # noqa: F401
     SeedResult,
     RunResults,
     load_experiment,
@@ -77,7 +77,7 @@ from rlcore.experiments.results import (  # noqa: F401
     snapshot_markdown,
     status_lines,
 )
-from rlcore.experiments.analysis import (  # noqa: F401
+from rlbook.analysis import (  # noqa: F401
     first_step_reaching,
     reward_per_epoch,
     covers_epochs,
@@ -96,4 +96,4 @@ from rlcore.experiments.analysis import (  # noqa: F401
     iqm_ci,
     iqm_difference_ci,
 )
-from rlcore.experiments.pages import PageRuns, check_printed, check_results, printed_numbers  # noqa: F401
+from rlbook.pages import PageRuns, check_printed, check_results, printed_numbers  # noqa: F401

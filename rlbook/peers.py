@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from rlcore.experiments.registry import RESULTS_DIR
-from rlcore.experiments.results import commit_text
+from rlbook.registry import RESULTS_DIR
+from rlbook.results import commit_text
 
 
 def peer_path(env_id: str, results_dir: Path = RESULTS_DIR) -> Path:

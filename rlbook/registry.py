@@ -14,7 +14,7 @@ from typing import Any
 
 
 
-REPO_ROOT = Path(__file__).resolve().parent.parent.parent
+REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 RESULTS_DIR = REPO_ROOT / "results"

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, get_experiment, run_paths
-from rlcore.experiments.runner import SNAPSHOT, SNAPSHOT_POLICY, _train_all, config_class
+from rlbook.registry import RESULTS_DIR, WORK_DIR, RunSpec, get_experiment, run_paths
+from rlbook.runner import SNAPSHOT, SNAPSHOT_POLICY, _train_all, config_class
 from rlcore.logger import read_csv
 
 
@@ -32,7 +32,7 @@ class TemporaryFolder:
 @dataclass
 class SeedResult:
     """One finished seed: its logs, its config and metadata, and (loaded on first use) its policy; or, with
-    ``snapshot`` set, a seed still training: its logs so far (:func:`rlcore.experiments.runner.snapshot_one`)."""
+    ``snapshot`` set, a seed still training: its logs so far (:func:`rlbook.runner.snapshot_one`)."""
 
     seed: int
     folder: Path
@@ -160,7 +160,7 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
 
     A live stand-in, or seeds still missing from ``results/``, get a visible warning.
     """
-    command = command or f"python -m rlcore experiments run {name} --jobs 2"
+    command = command or f"python -m rlbook experiments run {name} --jobs 2"
     full = next(r for r in get_experiment(name).runs if r.name == run.name)
     folder = f"results/{name}/{run.name}/"
     seeds = [s.seed for s in run.seeds]
