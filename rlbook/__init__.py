@@ -33,10 +33,8 @@ Everything is importable from ``rlbook`` itself.
 
 from __future__ import annotations
 
+from rlbook.paths import BookRootError, book_root, results_dir, work_dir  # noqa: F401
 from rlbook.registry import (  # noqa: F401
-    REPO_ROOT,
-    RESULTS_DIR,
-    WORK_DIR,
     RunSpec,
     Experiment,
     ZOO_PPO,
@@ -51,6 +49,7 @@ from rlbook.registry import (  # noqa: F401
     EXPERIMENTS,
     get_experiment,
     run_paths,
+    seed_folder,
 )
 from rlbook.runner import (  # noqa: F401
     chosen_runs,
@@ -64,6 +63,7 @@ from rlbook.runner import (  # noqa: F401
     SNAPSHOT_POLICY,
     run_in_pool,
     schedule,
+    train_all,
     run_experiment,
 )
 from rlbook.results import (  # noqa: F401

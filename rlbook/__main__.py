@@ -19,6 +19,7 @@ from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, seed_list
 
 def cmd_experiments(args: argparse.Namespace) -> int:
     import rlbook as ex
+    from rlbook import paths
 
     if args.action == "list":
         for name in sorted(ex.EXPERIMENTS):
@@ -28,7 +29,10 @@ def cmd_experiments(args: argparse.Namespace) -> int:
         return 0
     if not args.name:
         raise ValueError(f"experiments {args.action} needs an experiment name; see `python -m rlbook experiments list`")
-    results = Path(args.results)
+    results = Path(args.results) if args.results else None
+    work = Path(args.work) if args.work else None
+    if args.root:  # else each step finds the book's folders itself (rlbook.paths), after checking its arguments
+        results, work = results or paths.results_dir(args.root), work or paths.work_dir(args.root)
     if args.action == "reevaluate":
         from rlbook.reevaluation import store_final_policy_returns
 
@@ -40,25 +44,23 @@ def cmd_experiments(args: argparse.Namespace) -> int:
         return 0
     if args.action == "snapshot":
         for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
-                                           work=Path(args.work), policy=args.policy):
+                                           work=work, policy=args.policy):
             print(line)
         return 0
     if args.action == "run":
         try:
             lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
-                                      results=results, work=Path(args.work))
+                                      results=results, work=work)
         except KeyboardInterrupt:
             print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
                   "when you run the same command again.", file=sys.stderr)
             return EXIT_INTERRUPTED
         print("\n".join(lines))
-    print("\n".join(ex.status_lines(args.name, results, Path(args.work))))
+    print("\n".join(ex.status_lines(args.name, results, work)))
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rlbook import RESULTS_DIR, WORK_DIR
-
     p = Parser(prog="python -m rlbook", description="The book's full-budget experiments (resumable).")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
@@ -73,8 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--episodes", type=count(1), default=5, help="reevaluate: episodes per seed")
     x.add_argument("--policy", action="store_true",
                    help="snapshot: also the policy of each seed's last checkpoint (snapshot-policy.pt)")
-    x.add_argument("--results", default=str(RESULTS_DIR), help="where finished runs' small outputs go")
-    x.add_argument("--work", default=str(WORK_DIR), help="where runs train and keep full checkpoints")
+    x.add_argument("--root", help="the book's folder (default: RLBOOK_ROOT, else the checkout holding the current "
+                                  "folder); --results and --work default to its results/ and runs/")
+    x.add_argument("--results", help="where finished runs' small outputs go (default: ROOT/results)")
+    x.add_argument("--work", help="where runs train and keep full checkpoints (default: ROOT/runs)")
     x.set_defaults(func=cmd_experiments)
     return p
 
@@ -84,9 +88,10 @@ def main(argv: list[str] | None = None) -> int:
     from rlcore.checkpoint import CheckpointError
     from rlcore.envs import UnknownEnvironmentError
     from rlcore.render import HeadlessGLError
-    from rlcore.runs import stop_on_signals
+    from rlcore.runs import loaded_commit, stop_on_signals
 
     args = build_parser().parse_args(argv)
+    loaded_commit()  # the commit of the code this process loaded, which its runs record
     stop_on_signals()  # a `kill` (SIGTERM) or Ctrl-C: checkpoint, then stop
     try:
         return args.func(args)

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from rlbook.registry import RESULTS_DIR
+from rlbook import paths
 from rlbook.results import RunResults, load_experiment
 
 START_SEED = 50_000
@@ -53,8 +53,10 @@ def measure_run(experiment: str, run: RunResults, episodes: int, start: int = ST
             "seeds": {str(s.seed): measure_seed(s.policy, run.spec.env_id, episodes, start) for s in run.seeds}}
 
 
-def compare(arms: list[str], episodes: int, start: int = START_SEED, results: Path = RESULTS_DIR) -> dict[str, Any]:
-    """Measure every ``experiment/run`` of ``arms`` (all on the same body, at the same step budget)."""
+def compare(arms: list[str], episodes: int, start: int = START_SEED, results: Path | None = None) -> dict[str, Any]:
+    """Measure every ``experiment/run`` of ``arms`` (all on the same body, at the same step budget), from ``results``
+    (default: the book's ``results/``, :mod:`rlbook.paths`)."""
+    results = paths.results_dir() if results is None else results
     runs = {}
     for arm in arms:
         experiment, _, name = arm.partition("/")

@@ -145,13 +145,14 @@ def main(argv: list[str] | None = None) -> int:
     from rlcore.envs import UnknownEnvironmentError
     from rlcore.render import HeadlessGLError
 
-    from rlcore.runs import stop_on_signals
+    from rlcore.runs import loaded_commit, stop_on_signals
 
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["experiments"]:  # the book's experiments moved out of the library, into the book's package
         print(f"error: the book's experiments are run by `python -m rlbook {shlex.join(argv)}`", file=sys.stderr)
         return EXIT_USAGE
     args = build_parser().parse_args(argv)
+    loaded_commit()  # the commit of the code this process loaded, which its runs record
     stop_on_signals()  # a `kill` (SIGTERM) or Ctrl-C: checkpoint, then stop
     try:
         return args.func(args)

@@ -14,6 +14,7 @@ Every number the book shows can be traced back to these files.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import platform
@@ -107,13 +108,16 @@ def git_commit(cwd: str | os.PathLike | None = None) -> str | None:
         return None
 
 
-LOADED_COMMIT = git_commit()
-"""The checkout's commit when this process imported :mod:`rlcore.runs`, that is, the code it runs.
+@functools.cache
+def loaded_commit() -> str | None:
+    """The checkout's commit when this process first recorded a run (its first :func:`run_metadata`), taken as the
+    code it runs; asked once, so importing :mod:`rlcore.runs` runs no ``git``.
 
-A long-lived process (``experiments run`` training seed after seed) keeps running the code it loaded, even
-when the checkout moves on to new commits meanwhile. So a run records this commit, not the checkout's
-current one; where the two differ, :func:`run_metadata` records the latter as ``checkout_at_start``.
-"""
+    A long-lived process (``experiments run`` training seed after seed) keeps running the code it loaded, even
+    when the checkout moves on to new commits meanwhile. So a run records this commit, not the checkout's
+    current one; where the two differ, :func:`run_metadata` records the latter as ``checkout_at_start``.
+    """
+    return git_commit()
 
 
 def versions() -> dict[str, str]:
@@ -203,22 +207,23 @@ def cpu_model() -> str:
 def run_metadata(**extra: Any) -> dict[str, Any]:
     """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``.
 
-    ``commit`` is :data:`LOADED_COMMIT`, the code this process runs; ``checkout_at_start`` is added when the
+    ``commit`` is :func:`loaded_commit`, the code this process runs; ``checkout_at_start`` is added when the
     checkout has moved on since this process loaded it.
     """
     import torch
 
+    loaded = loaded_commit()
     meta = {
         "command": command_line(),
         "versions": versions(),
-        "commit": LOADED_COMMIT,
+        "commit": loaded,
         "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpu": cpu_model(),
                     "cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()},
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **extra,
     }
     now = git_commit()
-    if now != LOADED_COMMIT:
+    if now != loaded:
         meta["checkout_at_start"] = now
     return meta
 
