@@ -28,15 +28,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.buffers import gae
-from rlcore.config import check_budget, check_config
+from rlcore.config import check_budget, check_config, config_from_dict
 from rlcore.envs import make_env, pending_resets
 from rlcore.harness import Run, evaluation, running_stats, torch_rng
 from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, PPOPolicy, Rollout, annealing,  # noqa: F401
-                             collect_rollout, deterministic_policy, make_agent, make_envs, normalize,
+                             collect_rollout, deterministic_policy, gae, make_agent, make_envs, normalize,
                              set_learning_rate, training_statistics, valid_batch)
 from rlcore.onpolicy import check_spaces as _check_spaces
-from rlcore.runs import config_from_dict
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""

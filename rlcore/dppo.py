@@ -74,7 +74,7 @@ from torch.nn.parallel import DistributedDataParallel
 
 from rlcore import ppo
 from rlcore.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from rlcore.config import check_budget
+from rlcore.config import check_budget, config_dict
 from rlcore.distributed import (LAUNCH_HELP, _broadcast, broadcast_weights, gather_rollouts,  # noqa: F401
                                 init_distributed, merge_contributions, snapshot, stats_contribution,
                                 sync_running_stats)
@@ -85,7 +85,7 @@ from rlcore.onpolicy import (OBS_CLIP, Rollout, annealing, check_spaces, collect
                              make_agent, make_envs, set_learning_rate, training_statistics)
 from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
 from rlcore.ppo import ppo_update, rollout_batch
-from rlcore.runs import RunDir, config_dict, open_run
+from rlcore.runs import RunDir, open_run
 
 ALGO = "ppo"
 """The checkpoint's ``algo``: DPPO's checkpoints are PPO's, plus a ``distributed`` entry."""

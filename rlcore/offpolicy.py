@@ -32,6 +32,7 @@ import torch
 from torch import nn
 
 from rlcore.buffers import ReplayBuffer
+from rlcore.config import config_from_dict
 from rlcore.envs import ObservationScaler, make_env, normalize_observation
 from rlcore.harness import Run, running_stats
 from rlcore.nets import mlp
@@ -281,8 +282,6 @@ class DeterministicPolicy:
 
 def saved_actor(ckpt: dict[str, Any], config_cls: type, actor_cls: type) -> nn.Module:
     """The actor a checkpoint (or a ``policy.pt``) holds, rebuilt from its spaces and Config."""
-    from rlcore.runs import config_from_dict
-
     sp = ckpt["spaces"]
     config = config_from_dict(config_cls, ckpt["config"])
     actor = actor_cls(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])

@@ -31,14 +31,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.buffers import gae
 from rlcore.checkpoint import load_checkpoint
-from rlcore.config import check_budget, check_config
+from rlcore.config import check_budget, check_config, config_from_dict
 from rlcore.envs import make_env, pending_resets
 from rlcore.harness import Run, evaluation, running_stats, torch_rng
 from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, PPOPolicy, Rollout, annealing,  # noqa: F401
-                             check_spaces, collect_rollout, deterministic_policy, make_agent, make_envs, normalize,
-                             set_learning_rate, training_statistics, valid_batch)
+                             check_spaces, collect_rollout, deterministic_policy, gae, make_agent, make_envs,
+                             normalize, set_learning_rate, training_statistics, valid_batch)
 from rlcore.runs import RunDir
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
@@ -317,7 +316,7 @@ def evaluated_unclipped(ckpt: dict[str, Any]) -> bool:
 
 def load_policy(ckpt: dict[str, Any]) -> PPOPolicy:
     sp = ckpt["spaces"]
-    config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
+    config = config_from_dict(Config, ckpt["config"])
     agent = make_agent(sp, config)
     agent.load_state_dict(ckpt["agent"])
     mean, var = ckpt.get("obs_mean"), ckpt.get("obs_var")

@@ -13,7 +13,6 @@ Every number the book shows can be traced back to these files.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 import os
@@ -28,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from rlcore.config import config_dict
 
 
 class RunDir:
@@ -293,17 +294,6 @@ def changed_settings(saved: dict[str, Any], current: dict[str, Any]) -> list[str
     norm = lambda v: json.dumps(v, sort_keys=True, default=str)  # noqa: E731
     return [f"{k}: {saved[k]!r} -> {current[k]!r}" for k in sorted(saved.keys() & current.keys())
             if k not in RESUMABLE_CHANGES and norm(saved[k]) != norm(current[k])]
-
-
-def config_dict(config: Any) -> dict[str, Any]:
-    """A dataclass Config as a JSON-ready dict."""
-    return dataclasses.asdict(config)
-
-
-def config_from_dict(cls: type, values: dict[str, Any]) -> Any:
-    """Rebuild a Config dataclass from :func:`config_dict`'s output, ignoring unknown keys."""
-    names = {f.name for f in dataclasses.fields(cls)}
-    return cls(**{k: v for k, v in values.items() if k in names})
 
 
 def episode_seed(seed: int, episode: int) -> int:

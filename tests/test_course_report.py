@@ -2,8 +2,8 @@
 
 import pytest
 
-from rlcore.ddpg import Config
 from rlbook import REPORT_DDPG, get_experiment
+from rlcore.ddpg import Config
 from rlbook.course_report import (REPORT_DDPG_HUMANOID_TABLES, REPORT_DDPG_TABLES, REPORT_NAMES,
                                   report_overrides, report_steps)
 

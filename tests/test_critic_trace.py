@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from rlcore import ddpg
 from rlbook import critic_trace
+from rlcore import ddpg
 from rlcore.offpolicy import Minibatch
 
 SMALL = dict(hidden=(32, 32), learning_starts=300, batch_size=32, buffer_size=5_000, eval_every=400,

@@ -13,8 +13,8 @@ import pytest
 
 import rlbook as ex
 from rlcore.checkpoint import load_checkpoint
-from rlcore.evaluate import evaluate_policy
 from rlcore.envs import make_env
+from rlcore.evaluate import evaluate_policy
 
 
 @pytest.fixture

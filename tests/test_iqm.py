@@ -4,9 +4,9 @@ checked against hand computations; and the per-seed scores the chapters feed it.
 import numpy as np
 import pytest
 
-from rlcore.evaluate import iqm
 from rlbook import RunResults, RunSpec, SeedResult
 from rlbook.analysis import eval_curves, iqm_ci, iqm_difference_ci, second_half_means
+from rlcore.evaluate import iqm
 
 
 def test_iqm_is_the_mean_of_the_middle_half():

@@ -6,11 +6,11 @@ import json
 import pytest
 
 import rlbook as ex
-from rlcore.checkpoint import load_checkpoint
+from rlbook.runner import config_class, distributed_command
 from rlcore.a2c import Config as A2CConfig
+from rlcore.checkpoint import load_checkpoint
 from rlcore.cli import overrides, set_args, train_command
 from rlcore.dppo import Config
-from rlbook.runner import config_class, distributed_command
 
 
 def test_set_args_are_read_back_as_the_same_overrides():
