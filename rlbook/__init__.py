@@ -1,4 +1,5 @@
-"""Full-budget experiments: the named, resumable runs whose outputs the book shows.
+"""rlbook: the machinery that makes the book, beside the library. At its heart the full-budget experiments: the
+named, resumable runs whose outputs the book shows.
 
     python -m rlbook experiments list
     python -m rlbook experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
@@ -20,13 +21,23 @@ so far to its results folder with a ``snapshot.json`` (and no ``policy.pt``, so 
 Chapters read ``results/`` with :func:`load_experiment`; a run that is missing there is reported so
 that the chapter can say so and fall back to a short live run.
 
-The package, one idea a module:
+The package, one idea a module. It imports :mod:`rlcore`; :mod:`rlcore` never imports it.
 
+- :mod:`rlbook.paths`: where the book is (``RLBOOK_ROOT``, or the checkout around the working directory);
 - :mod:`rlbook.registry`: the named experiments (``RunSpec``, ``Experiment``, ``EXPERIMENTS``);
-- :mod:`rlbook.runner`: training them, one process per core, resumable;
+- :mod:`rlbook.runner`: training them, one process per core, resumable; snapshots of seeds still training;
 - :mod:`rlbook.results`: reading ``results/`` (or a short live stand-in) and its provenance;
 - :mod:`rlbook.analysis`: the statistics and tables the chapters quote;
-- :mod:`rlbook.pages`: an experiment's runs as a page loads, labels and describes them.
+- :mod:`rlbook.pages`: an experiment's runs as a page loads, labels and describes them; ``check_printed``;
+- :mod:`rlbook.reevaluation`: stored policies evaluated again, and the records that keep those numbers;
+- :mod:`rlbook.critic_trace`: a stored DDPG or TD3 seed re-trained with a read-only probe on its critic;
+- :mod:`rlbook.versus`: two algorithms' stored runs measured the same way;
+- :mod:`rlbook.peers`: the records of the returns benchmark against Stable-Baselines3;
+- :mod:`rlbook.course_report`: the course report's tables, as printed;
+- :mod:`rlbook.record_plots`: plots of the book's records (DPPO's scaling, a critic trace);
+- chapter helpers: :mod:`rlbook.tabular_experiments` (tabular seeds in a reused process pool),
+  :mod:`rlbook.tabular_plots`, :mod:`rlbook.mujoco_analysis`, :mod:`rlbook.overestimation`;
+- :mod:`rlbook.__main__`: ``python -m rlbook experiments ...``.
 
 Everything is importable from ``rlbook`` itself.
 """

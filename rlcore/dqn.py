@@ -30,11 +30,10 @@ import torch.nn.functional as F
 
 from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
 from rlcore.config import NON_NEGATIVE, check_budget, check_config, config_from_dict
-from rlcore.envs import make_env
+from rlcore.envs import episode_seed, make_env
 from rlcore.evaluate import discounted_return, episode_rewards
 from rlcore.harness import EPISODE_COLUMNS, EVAL_COLUMNS, Run, torch_rng
 from rlcore.nets import DuelingQNetwork, QNetwork, soft_update
-from rlcore.runs import episode_seed
 from rlcore.schedules import linear_schedule
 
 

@@ -33,10 +33,9 @@ from torch import nn
 
 from rlcore.buffers import ReplayBuffer
 from rlcore.config import config_from_dict
-from rlcore.envs import ObservationScaler, make_env, normalize_observation
+from rlcore.envs import ObservationScaler, episode_seed, make_env, normalize_observation
 from rlcore.harness import Run, running_stats
 from rlcore.nets import mlp
-from rlcore.runs import episode_seed
 
 
 @dataclass

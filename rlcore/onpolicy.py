@@ -117,7 +117,7 @@ class PPOPolicy:
         return np.clip(a, self.low, self.high)
 
 
-def check_spaces(env: gym.Env | gym.vector.VectorEnv, env_id: str, algo: str = "PPO") -> dict[str, Any]:
+def check_spaces(env: gym.Env | gym.vector.VectorEnv, env_id: str, algo: str) -> dict[str, Any]:
     """Observation and action sizes; a clear error (naming ``algo``) where the on-policy core does not apply."""
     obs = getattr(env, "single_observation_space", env.observation_space)
     # the action space of the environment itself: Gymnasium's ClipAction wrapper widens it to +-inf, and the

@@ -36,8 +36,9 @@ from rlcore.config import check_budget, check_config, config_from_dict
 from rlcore.envs import make_env, pending_resets
 from rlcore.harness import Run, evaluation, running_stats, torch_rng
 from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, PPOPolicy, Rollout, annealing,  # noqa: F401
-                             check_spaces, collect_rollout, deterministic_policy, gae, make_agent, make_envs,
-                             normalize, set_learning_rate, training_statistics, valid_batch)
+                             collect_rollout, deterministic_policy, gae, make_agent, make_envs, normalize,
+                             set_learning_rate, training_statistics, valid_batch)
+from rlcore.onpolicy import check_spaces as _check_spaces
 from rlcore.runs import RunDir
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
@@ -224,6 +225,11 @@ class Result:
 UPDATE_COLUMNS = ["iteration", "step", "policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction",
                   "kl_coef", "learning_rate"]
 """The columns of a run's ``updates.csv``: one row per iteration."""
+
+
+def check_spaces(envs: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str, Any]:
+    """The on-policy core's check (flat observations; Discrete or flat Box actions), with PPO in its messages."""
+    return _check_spaces(envs, env_id, "PPO")
 
 
 def refuse_distributed(out: str | Path | None) -> None:

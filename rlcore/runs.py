@@ -294,8 +294,3 @@ def changed_settings(saved: dict[str, Any], current: dict[str, Any]) -> list[str
     norm = lambda v: json.dumps(v, sort_keys=True, default=str)  # noqa: E731
     return [f"{k}: {saved[k]!r} -> {current[k]!r}" for k in sorted(saved.keys() & current.keys())
             if k not in RESUMABLE_CHANGES and norm(saved[k]) != norm(current[k])]
-
-
-def episode_seed(seed: int, episode: int) -> int:
-    """The reset seed of episode ``episode`` of a run seeded ``seed`` (independent of interruptions)."""
-    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])

@@ -48,3 +48,14 @@ def test_importing_every_rlcore_module_loads_no_rlbook():
 
 def test_rlbook_imports_rlcore():
     assert any(m.split(".")[0] == "rlcore" for f in (ROOT / "rlbook").rglob("*.py") for m in imported_modules(f))
+
+
+def test_each_package_docstring_names_every_module():
+    import rlbook
+    import rlcore
+
+    for package in (rlcore, rlbook):
+        folder = Path(package.__file__).parent
+        names = {f".".join((package.__name__, f.stem)) for f in folder.glob("*.py") if f.stem != "__init__"}
+        missing = sorted(n for n in names if f":mod:`{n}`" not in package.__doc__)
+        assert not missing, f"{package.__name__}'s docstring does not name {missing}"
