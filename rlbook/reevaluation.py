@@ -145,17 +145,17 @@ def store_final_policy_returns(run: RunResults, episodes: int = 5) -> list[Path]
 
 def trained_before_clipping_fix(run: RunResults) -> np.ndarray:
     """Per seed: whether its saved policy was written before PPO's deterministic policy clipped its actions
-    (:func:`rlcore.ppo.evaluated_unclipped`), so that the evaluations in its ``eval.csv`` paid the control cost
+    (:func:`rlcore.onpolicy.evaluated_unclipped`), so that the evaluations in its ``eval.csv`` paid the control cost
     on unclipped actions."""
     from rlcore.checkpoint import load_checkpoint
-    from rlcore.ppo import evaluated_unclipped
+    from rlcore.onpolicy import evaluated_unclipped
 
     return np.array([evaluated_unclipped(load_checkpoint(s.folder / "policy.pt")) for s in run.seeds], dtype=bool)
 
 
 def action_clipping_returns(policy: Any, env_id: str, episodes: int = 2, seed: int = 20_000,
                             sample_seed: int = 0) -> dict[str, float]:
-    """A PPO policy (:class:`rlcore.onpolicy.PPOPolicy`) run three ways on the same ``episodes`` start states:
+    """A PPO policy (:class:`rlcore.onpolicy.ActorCriticPolicy`) run three ways on the same ``episodes`` start states:
 
     - ``"clipped"``: the Gaussian's mean action clipped to the action space (what every evaluation does);
     - ``"unclipped"``: the mean action as the network gives it (what evaluations did before the fix);
