@@ -32,11 +32,7 @@ def export_policy(checkpoint: str | os.PathLike, dest: str | os.PathLike) -> int
 
 
 def config_class(algo: str) -> type:
-    """The Config dataclass of ``algo``: the command line's algorithms, and ``dppo`` (started by torchrun)."""
-    if algo == "dppo":
-        from rlcore.dppo import Config
-
-        return Config
+    """The Config dataclass of ``algo``, an algorithm of :mod:`rlcore.algos`."""
     from rlcore.algos import get_algorithm
 
     return get_algorithm(algo).Config

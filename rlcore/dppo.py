@@ -89,6 +89,8 @@ from rlcore.runs import RunDir, open_run
 
 ALGO = "ppo"
 """The checkpoint's ``algo``: DPPO's checkpoints are PPO's, plus a ``distributed`` entry."""
+POLICY_KEYS = ppo.POLICY_KEYS
+"""Checkpoint keys :func:`load_policy` needs: PPO's."""
 
 PROGRESS_COLUMNS = ["iteration", "step", "episodes", "episode_return", "env_steps_per_second", "update_seconds",
                     "rollout_seconds", "policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction",
