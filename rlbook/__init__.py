@@ -35,7 +35,7 @@ The package, one idea a module. It imports :mod:`rlcore`; :mod:`rlcore` never im
 - :mod:`rlbook.peers`: the records of the returns benchmark against Stable-Baselines3;
 - :mod:`rlbook.course_report`: the course report's tables, as printed;
 - :mod:`rlbook.record_plots`: plots of the book's records (DPPO's scaling, a critic trace);
-- chapter helpers: :mod:`rlbook.tabular_experiments` (tabular seeds in a reused process pool),
+- chapter helpers: :mod:`rlbook.tabular_seeds` (tabular seeds in a reused process pool),
   :mod:`rlbook.tabular_plots`, :mod:`rlbook.mujoco_analysis`, :mod:`rlbook.overestimation`;
 - :mod:`rlbook.__main__`: ``python -m rlbook experiments ...``.
 
