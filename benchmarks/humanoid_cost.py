@@ -32,7 +32,7 @@ SETTINGS = (("ddpg-report-humanoid", "small"), ("ddpg-report-humanoid", "large")
 
 def humanoid_specs() -> dict[tuple[str, str], object]:
     """The registry's Humanoid DDPG runs, by (experiment, run name)."""
-    from rlcore.experiments import get_experiment
+    from rlbook import get_experiment
 
     return {(exp, name): next(s for s in get_experiment(exp).runs if s.name == name) for exp, name in SETTINGS}
 

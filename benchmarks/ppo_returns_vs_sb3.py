@@ -35,7 +35,7 @@ EVAL_EVERY, EVAL_EPISODES, FINAL_EPISODES = 20_000, 5, 10
 
 def sb3_settings(env_id: str) -> tuple[dict, int]:
     """SB3 PPO keyword arguments for rlcore's RL-Zoo run on ``env_id``, and its step budget."""
-    from rlcore.experiments import get_experiment
+    from rlbook import get_experiment
     from rlcore.ppo import Config
 
     runs = {r.name: r for r in get_experiment("ppo-mujoco-1m").runs}
@@ -104,12 +104,12 @@ def main() -> None:
     args = p.parse_args()
     torch.set_num_threads(1)
 
-    from rlcore.experiments.peers import peer_path
+    from rlbook.peers import peer_path
     from rlcore.runs import git_commit
 
     settings, budget = sb3_settings(args.env)
     steps = args.steps or budget
-    out = Path(args.out) if args.out else peer_path(args.env)   # where rlcore.experiments.peers reads it
+    out = Path(args.out) if args.out else peer_path(args.env)   # where rlbook.peers reads it
     record = json.loads(out.read_text()) if out.exists() else {"seeds": []}
     if record["seeds"] and record.get("steps") != steps:
         raise ValueError(f"{out} holds runs of {record.get('steps')} steps, not {steps}: choose another --out")

@@ -1,28 +1,50 @@
-"""rlcore: the small, tested reinforcement-learning library behind the course book.
+"""rlcore: the small, tested reinforcement-learning library a student of the course book studies and reuses.
 
-One idea per module (see the design card in the README):
+One idea per module. The book's own machinery (its named experiments, ``results/``, the pages' helpers) is a
+separate package, ``rlbook``, which imports this one; nothing here imports it (``tests/test_layering.py``).
 
-- :mod:`rlcore.envs`       environment construction and seeding on Gymnasium
-- :mod:`rlcore.render`     offscreen rollouts to frames and GIFs, headless GL selection
-- :mod:`rlcore.evaluate`   evaluation episodes and statistics over seeds
-- :mod:`rlcore.logger`     CSV progress logs
-- :mod:`rlcore.checkpoint` atomic save, ``weights_only=True`` load
-- :mod:`rlcore.plots`      learning curves with a band over seeds
-- :mod:`rlcore.runs`       the output directory of one training run
-- :mod:`rlcore.profile`    the quick/book budget switch the chapters read
-- :mod:`rlcore.nets`       ``mlp()`` and the Q-network, dueling, actor and critic heads
-- :mod:`rlcore.buffers`    replay buffer, sum tree, prioritized replay, GAE
-- :mod:`rlcore.noise`      Gaussian, Ornstein-Uhlenbeck and adaptive parameter noise
-- :mod:`rlcore.tabular`    tabular Q-learning and SARSA, value iteration
-- :mod:`rlcore.dqn`        DQN with Double, Dueling and Prioritized switches
-- :mod:`rlcore.a2c`        A2C, synchronous advantage actor-critic
-- :mod:`rlcore.offpolicy`  the off-policy core DDPG, TD3 and SAC share
-- :mod:`rlcore.ddpg`       DDPG
-- :mod:`rlcore.td3`        TD3: clipped double Q, target-policy smoothing, delayed updates
-- :mod:`rlcore.sac`        SAC: maximum entropy, a squashed Gaussian policy, automatic temperature
-- :mod:`rlcore.ppo`        PPO, clipped and adaptive-KL
-- :mod:`rlcore.experiments` the book's named, resumable full-budget experiments
-- :mod:`rlcore.algos`      the registry of algorithms the command line knows
+The algorithms, each a ``Config``, the math as small functions, and a ``train`` that follows its algorithm box:
+
+- :mod:`rlcore.tabular`     tabular Q-learning and SARSA, value iteration
+- :mod:`rlcore.dqn`         DQN with Double, Dueling and Prioritized switches
+- :mod:`rlcore.a2c`         A2C, synchronous advantage actor-critic
+- :mod:`rlcore.ppo`         PPO, clipped and adaptive-KL
+- :mod:`rlcore.dppo`        PPO on N data-parallel workers (torchrun)
+- :mod:`rlcore.ddpg`        DDPG
+- :mod:`rlcore.td3`         TD3: clipped double Q, target-policy smoothing, delayed updates
+- :mod:`rlcore.sac`         SAC: maximum entropy, a squashed Gaussian policy, automatic temperature
+
+What they share:
+
+- :mod:`rlcore.onpolicy`    the on-policy core of A2C, PPO and DPPO: actor-critic, rollouts, GAE
+- :mod:`rlcore.offpolicy`   the off-policy core of DDPG, TD3 and SAC: the loop, actor, critics, replay set-up
+- :mod:`rlcore.harness`     everything around a training loop: run folder, resume, checkpoints, logs, evaluation
+- :mod:`rlcore.nets`        ``mlp()`` and the Q-network, dueling, actor and critic heads
+- :mod:`rlcore.buffers`     replay buffer, sum tree, prioritized replay
+- :mod:`rlcore.noise`       Gaussian, Ornstein-Uhlenbeck and adaptive parameter noise
+- :mod:`rlcore.schedules`   how a hyperparameter moves over a run (epsilon's decay)
+- :mod:`rlcore.config`      checks of every Config's values; a Config to and from a dict
+- :mod:`rlcore.envs`        environment construction and seeding on Gymnasium
+- :mod:`rlcore.wrappers`    environment wrappers that package a mistake (a time-out reported as termination)
+- :mod:`rlcore.distributed` ``torch.distributed`` pieces for DPPO
+- :mod:`rlcore.launch`      the torchrun command line that starts DPPO's workers, and finding them again
+
+Around a run:
+
+- :mod:`rlcore.evaluate`    evaluation episodes and statistics over seeds
+- :mod:`rlcore.checkpoint`  atomic save, ``weights_only=True`` load
+- :mod:`rlcore.runs`        a run's output folder and what it records about itself (command, versions, commit)
+- :mod:`rlcore.logger`      CSV progress logs
+- :mod:`rlcore.plots`       learning curves with a band over seeds, and per-seed scores
+- :mod:`rlcore.render`      offscreen rollouts to frames and GIFs
+- :mod:`rlcore.gl`          which headless OpenGL backend MuJoCo renders with
+- :mod:`rlcore.profile`     the quick/book budget switch (``RLBOOK_PROFILE``)
+
+The command line, ``python -m rlcore train | evaluate | render``:
+
+- :mod:`rlcore.algos`       the algorithms it knows, by name
+- :mod:`rlcore.cli`         what its command lines share: argument types, ``--set`` parsing, exit statuses
+- :mod:`rlcore.__main__`    the commands themselves
 
 Modules are imported on demand (``import rlcore.envs``) so that ``import rlcore`` stays cheap.
 """

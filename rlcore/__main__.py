@@ -3,7 +3,6 @@
     python -m rlcore train q-learning --env FrozenLake-v1 --steps 20000 --seed 0 --out runs/fl
     python -m rlcore evaluate runs/fl --episodes 10      # last line: one JSON object
     python -m rlcore render runs/fl --out fl.gif
-    python -m rlcore experiments run dqn-cartpole --jobs 2   # the book's full-budget runs, resumable
 
 ``train`` shows a progress bar; Ctrl-C saves a checkpoint, and running the same command again resumes.
 Errors a user can fix (an unknown environment or algorithm, a corrupt checkpoint, no headless GL)
@@ -14,10 +13,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from pathlib import Path
 
-from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, json_object, seed_list
+from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, json_object
 from rlcore.cli import overrides as overrides_of
 
 
@@ -104,45 +104,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_experiments(args: argparse.Namespace) -> int:
-    from rlcore import experiments as ex
-
-    if args.action == "list":
-        for name in sorted(ex.EXPERIMENTS):
-            exp = ex.get_experiment(name)
-            runs = sum(len(r.seeds) for r in exp.runs)
-            print(f"{name}: {exp.description} ({len(exp.runs)} configurations, {runs} runs)")
-        return 0
-    if not args.name:
-        raise ValueError(f"experiments {args.action} needs an experiment name; see `python -m rlcore experiments list`")
-    results = Path(args.results)
-    if args.action == "reevaluate":
-        from rlcore.experiments.reevaluation import store_final_policy_returns
-
-        chosen = {spec.name for spec in ex.chosen_runs(args.name, args.only)}
-        for run_name, run in ex.load_experiment(args.name, results).items():
-            if run.seeds and run_name in chosen:
-                for path in store_final_policy_returns(run, episodes=args.episodes):
-                    print(f"Wrote {path}")
-        return 0
-    if args.action == "snapshot":
-        for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
-                                           work=Path(args.work), policy=args.policy):
-            print(line)
-        return 0
-    if args.action == "run":
-        try:
-            lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
-                                      results=results, work=Path(args.work))
-        except KeyboardInterrupt:
-            print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
-                  "when you run the same command again.", file=sys.stderr)
-            return EXIT_INTERRUPTED
-        print("\n".join(lines))
-    print("\n".join(ex.status_lines(args.name, results, Path(args.work))))
-    return 0
-
-
 def build_parser() -> argparse.ArgumentParser:
     from rlcore.algos import ALGORITHMS
 
@@ -175,23 +136,6 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=count(0), default=0)
     r.set_defaults(func=cmd_render)
 
-    from rlcore.experiments import RESULTS_DIR, WORK_DIR
-
-    x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
-    x.add_argument("action", choices=["list", "run", "status", "reevaluate", "snapshot"],
-                   help="reevaluate: evaluate each finished seed's final policy and store its returns in results/; "
-                        "snapshot: copy the logs so far of seeds still training to results/ (with --policy, the "
-                        "policy of their last checkpoint too)")
-    x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
-    x.add_argument("--jobs", type=count(1), default=1, help="runs in parallel, one process each (one per core)")
-    x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
-    x.add_argument("--seeds", type=seed_list, help="comma-separated subset of the seeds, e.g. 0,1")
-    x.add_argument("--episodes", type=count(1), default=5, help="reevaluate: episodes per seed")
-    x.add_argument("--policy", action="store_true",
-                   help="snapshot: also the policy of each seed's last checkpoint (snapshot-policy.pt)")
-    x.add_argument("--results", default=str(RESULTS_DIR), help="where finished runs' small outputs go")
-    x.add_argument("--work", default=str(WORK_DIR), help="where runs train and keep full checkpoints")
-    x.set_defaults(func=cmd_experiments)
     return p
 
 
@@ -201,9 +145,14 @@ def main(argv: list[str] | None = None) -> int:
     from rlcore.envs import UnknownEnvironmentError
     from rlcore.render import HeadlessGLError
 
-    from rlcore.runs import stop_on_signals
+    from rlcore.runs import loaded_commit, stop_on_signals
 
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["experiments"]:  # the book's experiments moved out of the library, into the book's package
+        print(f"error: the book's experiments are run by `python -m rlbook {shlex.join(argv)}`", file=sys.stderr)
+        return EXIT_USAGE
     args = build_parser().parse_args(argv)
+    loaded_commit()  # the commit of the code this process loaded, which its runs record
     stop_on_signals()  # a `kill` (SIGTERM) or Ctrl-C: checkpoint, then stop
     try:
         return args.func(args)

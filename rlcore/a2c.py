@@ -28,15 +28,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.buffers import gae
 from rlcore.config import check_budget, check_config
 from rlcore.envs import make_env, pending_resets
 from rlcore.harness import Run, evaluation, running_stats, torch_rng
-from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, PPOPolicy, Rollout, annealing,  # noqa: F401
-                             collect_rollout, deterministic_policy, make_agent, make_envs, normalize,
-                             set_learning_rate, training_statistics, valid_batch)
+from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, Rollout, annealing,  # noqa: F401
+                             collect_rollout, deterministic_policy, gae, make_agent, make_envs, normalize,
+                             saved_policy, set_learning_rate, training_statistics, valid_batch)
 from rlcore.onpolicy import check_spaces as _check_spaces
-from rlcore.runs import config_from_dict
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -199,7 +197,7 @@ def check_spaces(envs: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str,
 @dataclass
 class Result:
     agent: ActorCritic
-    policy: PPOPolicy
+    policy: ActorCriticPolicy
     episode_returns: np.ndarray
     episode_end_steps: np.ndarray
     eval_steps: np.ndarray
@@ -277,13 +275,6 @@ def make_config(algo: str, **overrides: Any) -> Config:
     return Config(**overrides)
 
 
-def load_policy(ckpt: dict[str, Any]) -> PPOPolicy:
+def load_policy(ckpt: dict[str, Any]) -> ActorCriticPolicy:
     """The deterministic policy of a checkpoint (the keys in POLICY_KEYS, plus its config)."""
-    sp = ckpt["spaces"]
-    agent = make_agent(sp, config_from_dict(Config, ckpt["config"]))
-    agent.load_state_dict(ckpt["agent"])
-    to_np = lambda t: None if t is None else np.asarray(t)  # noqa: E731
-    low = np.array(sp["low"], dtype=np.float32) if "low" in sp else None
-    high = np.array(sp["high"], dtype=np.float32) if "high" in sp else None
-    return PPOPolicy(agent, to_np(ckpt.get("obs_mean")), to_np(ckpt.get("obs_var")), float(ckpt.get("obs_clip", 10.0)),
-                     low, high)
+    return saved_policy(ckpt, Config)

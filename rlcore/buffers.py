@@ -211,34 +211,3 @@ class PrioritizedReplayBuffer(ReplayBuffer):
         super().load_state_dict(state)
         self.tree.update(np.arange(self.size), np.asarray(state["priorities"]))
         self.max_priority = float(state["max_priority"])
-
-
-def gae(
-    rewards: np.ndarray,
-    values: np.ndarray,
-    next_values: np.ndarray,
-    terminated: np.ndarray,
-    episode_ends: np.ndarray,
-    gamma: float,
-    lam: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Generalized advantage estimation (Schulman et al. 2016) over a rollout of T steps.
-
-    delta_t = r_t + gamma * V(s_{t+1}) * (1 - terminated_t) - V(s_t)
-    A_t     = delta_t + gamma * lam * (1 - episode_end_t) * A_{t+1}
-
-    ``next_values[t]`` is V of the state reached by step t: at a time-limit truncation that is the
-    last observation of the episode, whose value is bootstrapped (truncation is not termination);
-    ``episode_ends`` (terminated or truncated) stops the sum from running into the next episode.
-    Arrays have shape (T,) or (T, n_envs). Returns (advantages, returns = advantages + values).
-    """
-    rewards, values, next_values = (np.asarray(x, dtype=np.float64) for x in (rewards, values, next_values))
-    not_terminal = 1.0 - np.asarray(terminated, dtype=np.float64)
-    not_end = 1.0 - np.asarray(episode_ends, dtype=np.float64)
-    advantages = np.zeros_like(rewards)
-    last = np.zeros_like(rewards[0])
-    for t in reversed(range(len(rewards))):
-        delta = rewards[t] + gamma * next_values[t] * not_terminal[t] - values[t]
-        last = delta + gamma * lam * not_end[t] * last
-        advantages[t] = last
-    return advantages, advantages + values

@@ -22,6 +22,10 @@ FORMAT = "rlcore-checkpoint"
 FORMAT_VERSION = 1
 _PRIMITIVES = (str, int, float, bool, type(None))
 
+META_KEYS = ("algo", "env_id", "seed", "config", "step", "episode", "total_steps", "complete")
+"""What every training checkpoint says about itself (:meth:`rlcore.harness.Run.state`); a policy-only copy keeps
+these and its algorithm's ``POLICY_KEYS``."""
+
 
 class CheckpointError(RuntimeError):
     """A file that is missing, truncated, or not an rlcore checkpoint."""

@@ -152,7 +152,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint).
 
     ``probe``, for diagnostics only, is called before every learning step (:data:`rlcore.offpolicy.Probe`); it must
-    only read, so that the run stays the run it would be without it (:mod:`rlcore.experiments.critic_trace`).
+    only read, so that the run stays the run it would be without it (the book's critic trace is one).
     """
     check_budget(steps, seed)
     config = config or Config()

@@ -95,7 +95,7 @@ def broadcast_weights(model: torch.nn.Module) -> None:
     torch.nn.utils.vector_to_parameters(vec, model.parameters())
 
 
-def _broadcast(obj: Any) -> Any:
+def broadcast_object(obj: Any) -> Any:
     """Rank 0's ``obj`` on every rank."""
     box = [obj]
     dist.broadcast_object_list(box, src=0)

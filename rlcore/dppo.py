@@ -74,8 +74,8 @@ from torch.nn.parallel import DistributedDataParallel
 
 from rlcore import ppo
 from rlcore.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from rlcore.config import check_budget
-from rlcore.distributed import (LAUNCH_HELP, _broadcast, broadcast_weights, gather_rollouts,  # noqa: F401
+from rlcore.config import check_budget, config_dict
+from rlcore.distributed import (LAUNCH_HELP, broadcast_object, broadcast_weights, gather_rollouts,  # noqa: F401
                                 init_distributed, merge_contributions, snapshot, stats_contribution,
                                 sync_running_stats)
 from rlcore.envs import make_env
@@ -85,10 +85,12 @@ from rlcore.onpolicy import (OBS_CLIP, Rollout, annealing, check_spaces, collect
                              make_agent, make_envs, set_learning_rate, training_statistics)
 from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
 from rlcore.ppo import ppo_update, rollout_batch
-from rlcore.runs import RunDir, config_dict, open_run
+from rlcore.runs import RunDir, open_run
 
 ALGO = "ppo"
 """The checkpoint's ``algo``: DPPO's checkpoints are PPO's, plus a ``distributed`` entry."""
+POLICY_KEYS = ppo.POLICY_KEYS
+"""Checkpoint keys :func:`load_policy` needs: PPO's."""
 
 PROGRESS_COLUMNS = ["iteration", "step", "episodes", "episode_return", "env_steps_per_second", "update_seconds",
                     "rollout_seconds", "policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction",
@@ -174,7 +176,7 @@ def open_on_rank0(out, env_id: str, config: Config, steps: int, seed: int, meta:
             folder, ckpt = open_run(out, ALGO, env_id, seed, steps, config, schedules=annealing(config), **meta)
         except (ValueError, CheckpointError) as exc:
             error = str(exc)
-    ckpt, error = _broadcast((ckpt, error))
+    ckpt, error = broadcast_object((ckpt, error))
     if error is not None:
         raise ValueError(error)
     return folder, ckpt
@@ -233,7 +235,7 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
     rank, world = dist.get_rank(), dist.get_world_size()
     torch.manual_seed(seed)  # the same initial weights on every worker (DDP also broadcasts rank 0's)
     envs = make_envs(env_id, config, seed + 1_000 * rank)
-    spaces = check_spaces(envs, env_id)
+    spaces = check_spaces(envs, env_id, "DPPO")
     agent = make_agent(spaces, config)
     optimizer = ppo.make_optimizer(agent, config)
     obs_rms, ret_rms = training_statistics(envs)

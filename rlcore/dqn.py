@@ -29,12 +29,11 @@ import torch
 import torch.nn.functional as F
 
 from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
-from rlcore.config import NON_NEGATIVE, check_budget, check_config
-from rlcore.envs import make_env
+from rlcore.config import NON_NEGATIVE, check_budget, check_config, config_from_dict
+from rlcore.envs import episode_seed, make_env
 from rlcore.evaluate import discounted_return, episode_rewards
 from rlcore.harness import EPISODE_COLUMNS, EVAL_COLUMNS, Run, torch_rng
 from rlcore.nets import DuelingQNetwork, QNetwork, soft_update
-from rlcore.runs import episode_seed
 from rlcore.schedules import linear_schedule
 
 
@@ -329,7 +328,7 @@ def make_config(algo: str, **overrides: Any) -> Config:
 
 def load_policy(ckpt: dict[str, Any]) -> GreedyPolicy:
     """The greedy policy of a DQN checkpoint."""
-    config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
+    config = config_from_dict(Config, ckpt["config"])
     state = ckpt["q"]
     first = next(k for k in state if k.endswith("weight"))
     obs_dim = state[first].shape[1]

@@ -104,6 +104,11 @@ def make_vec_env(
     return envs
 
 
+def episode_seed(seed: int, episode: int) -> int:
+    """The reset seed of episode ``episode`` of a run seeded ``seed`` (independent of interruptions)."""
+    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
+
+
 def is_discrete(space: gym.Space) -> bool:
     """True for a ``Discrete`` space."""
     return isinstance(space, gym.spaces.Discrete)

@@ -43,7 +43,8 @@ from tqdm import tqdm
 from rlcore.checkpoint import Saved, load_running_stats, running_stats_state, save_checkpoint  # noqa: F401
 from rlcore.envs import episode_state, restore_episode
 from rlcore.logger import CSVLogger
-from rlcore.runs import RunDir, config_dict, open_run
+from rlcore.config import config_dict
+from rlcore.runs import RunDir, open_run
 
 EPISODE_COLUMNS = ["episode", "step", "episode_return", "episode_length"]
 """The columns of ``progress.csv`` for an algorithm that logs one row per episode (before its own ones)."""

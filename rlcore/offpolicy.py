@@ -32,10 +32,10 @@ import torch
 from torch import nn
 
 from rlcore.buffers import ReplayBuffer
-from rlcore.envs import ObservationScaler, make_env, normalize_observation
+from rlcore.config import config_from_dict
+from rlcore.envs import ObservationScaler, episode_seed, make_env, normalize_observation
 from rlcore.harness import Run, running_stats
 from rlcore.nets import mlp
-from rlcore.runs import episode_seed
 
 
 @dataclass
@@ -281,8 +281,6 @@ class DeterministicPolicy:
 
 def saved_actor(ckpt: dict[str, Any], config_cls: type, actor_cls: type) -> nn.Module:
     """The actor a checkpoint (or a ``policy.pt``) holds, rebuilt from its spaces and Config."""
-    from rlcore.runs import config_from_dict
-
     sp = ckpt["spaces"]
     config = config_from_dict(config_cls, ckpt["config"])
     actor = actor_cls(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
@@ -316,7 +314,8 @@ class Minibatch:
 
 Probe = Callable[[int, Minibatch, nn.Module, Callable[[], torch.Tensor], float], None]
 """A diagnostic called before every learning step: ``probe(step, minibatch, critic, target, gamma)``, where
-``target()`` computes that step's critic targets y. It must only read (:mod:`rlcore.experiments.critic_trace`)."""
+``target()`` computes that step's critic targets y. It must only read, so that the run it watches
+is the run without it (the book's critic trace is one)."""
 
 
 class OffPolicyLoop:

@@ -3,12 +3,14 @@
 - :class:`ActorCritic`: a Gaussian (continuous) or categorical (discrete) policy pi(a|s) and a value V(s), with
   :func:`make_agent` to build one from a Config;
 - :func:`make_envs`: the vectorized training environments, observations and rewards normalized as configured;
-- :class:`PPOPolicy`: the deterministic policy saved with a run, which applies training's observation scaling to
-  raw observations itself; :func:`check_spaces`;
+- :class:`ActorCriticPolicy`: the deterministic policy of an actor-critic that A2C, PPO and DPPO save with a run,
+  which applies training's observation scaling to raw observations itself; :func:`check_spaces`;
 - :class:`Rollout` and :func:`collect_rollout`: one rollout of the stochastic policy in every environment, with
-  V(s_{t+1}) bootstrapped at time limits and nothing carried across a reset; :func:`valid_batch` flattens it;
+  V(s_{t+1}) bootstrapped at time limits and nothing carried across a reset; :func:`gae`, its advantages and
+  returns; :func:`valid_batch` flattens it;
 - :func:`normalize`: advantage standardization; :func:`set_learning_rate`, :func:`training_statistics`,
-  :func:`deterministic_policy`: what every on-policy ``train`` does around its loop.
+  :func:`deterministic_policy`: what every on-policy ``train`` does around its loop;
+- :func:`saved_policy`: the deterministic policy a checkpoint holds (what every ``load_policy`` here returns).
 
 A Config here is any of :mod:`rlcore.a2c`'s or :mod:`rlcore.ppo`'s: the functions read the fields they share.
 """
@@ -22,6 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from rlcore.config import config_from_dict
 from rlcore.envs import find_wrapper, make_vec_env, normalize_observation
 from rlcore.nets import mlp
 
@@ -91,7 +94,7 @@ def make_agent(spaces: dict[str, Any], config: Any) -> ActorCritic:
                        config.activation, config.ortho_init)
 
 
-class PPOPolicy:
+class ActorCriticPolicy:
     """The deterministic policy (Gaussian mean, or most likely action) with training's observation scaling."""
 
     def __init__(self, agent: ActorCritic, obs_mean=None, obs_var=None, obs_clip: float = 10.0, low=None, high=None):
@@ -116,7 +119,7 @@ class PPOPolicy:
         return np.clip(a, self.low, self.high)
 
 
-def check_spaces(env: gym.Env | gym.vector.VectorEnv, env_id: str, algo: str = "PPO") -> dict[str, Any]:
+def check_spaces(env: gym.Env | gym.vector.VectorEnv, env_id: str, algo: str) -> dict[str, Any]:
     """Observation and action sizes; a clear error (naming ``algo``) where the on-policy core does not apply."""
     obs = getattr(env, "single_observation_space", env.observation_space)
     # the action space of the environment itself: Gymnasium's ClipAction wrapper widens it to +-inf, and the
@@ -215,6 +218,37 @@ def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndar
     return obs
 
 
+def gae(
+    rewards: np.ndarray,
+    values: np.ndarray,
+    next_values: np.ndarray,
+    terminated: np.ndarray,
+    episode_ends: np.ndarray,
+    gamma: float,
+    lam: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Generalized advantage estimation (Schulman et al. 2016) over a rollout of T steps.
+
+    delta_t = r_t + gamma * V(s_{t+1}) * (1 - terminated_t) - V(s_t)
+    A_t     = delta_t + gamma * lam * (1 - episode_end_t) * A_{t+1}
+
+    ``next_values[t]`` is V of the state reached by step t: at a time-limit truncation that is the
+    last observation of the episode, whose value is bootstrapped (truncation is not termination);
+    ``episode_ends`` (terminated or truncated) stops the sum from running into the next episode.
+    Arrays have shape (T,) or (T, n_envs). Returns (advantages, returns = advantages + values).
+    """
+    rewards, values, next_values = (np.asarray(x, dtype=np.float64) for x in (rewards, values, next_values))
+    not_terminal = 1.0 - np.asarray(terminated, dtype=np.float64)
+    not_end = 1.0 - np.asarray(episode_ends, dtype=np.float64)
+    advantages = np.zeros_like(rewards)
+    last = np.zeros_like(rewards[0])
+    for t in reversed(range(len(rewards))):
+        delta = rewards[t] + gamma * next_values[t] * not_terminal[t] - values[t]
+        last = delta + gamma * lam * not_end[t] * last
+        advantages[t] = last
+    return advantages, advantages + values
+
+
 def valid_batch(buf: Rollout, advantages: np.ndarray, returns: np.ndarray) -> dict[str, torch.Tensor]:
     """A rollout's valid transitions, flattened: ``obs``, ``act``, ``logp`` (of the acting policy), ``adv``,
     ``ret``."""
@@ -255,7 +289,36 @@ OBS_CLIP = 10.0
 """Normalized observations are clipped to +-OBS_CLIP (:func:`make_envs`); the saved policy does the same."""
 
 
-def deterministic_policy(agent: ActorCritic, spaces: dict[str, Any], obs_rms: Any = None) -> PPOPolicy:
+def deterministic_policy(agent: ActorCritic, spaces: dict[str, Any], obs_rms: Any = None) -> ActorCriticPolicy:
     """The policy to evaluate and save now: the agent with a copy of the current observation statistics."""
     mean, var = (None, None) if obs_rms is None else (obs_rms.mean.copy(), obs_rms.var.copy())
-    return PPOPolicy(agent, mean, var, OBS_CLIP, spaces.get("low"), spaces.get("high"))
+    return ActorCriticPolicy(agent, mean, var, OBS_CLIP, spaces.get("low"), spaces.get("high"))
+
+
+def evaluated_unclipped(ckpt: dict[str, Any]) -> bool:
+    """Whether the code that wrote this checkpoint (or saved policy) evaluated unclipped mean actions.
+
+    Before the deterministic policy clipped its actions, :func:`check_spaces` recorded ClipAction's +-inf
+    bounds, and the evaluations logged during training handed the raw Gaussian mean to the environment.
+    Such a run's ``eval.csv`` undercounts on tasks with a control cost; :func:`saved_policy` fixes the policy.
+    """
+    sp = ckpt.get("spaces", {})
+    return "low" in sp and not (np.isfinite(sp["low"]).all() and np.isfinite(sp["high"]).all())
+
+
+def saved_policy(ckpt: dict[str, Any], config_cls: type) -> ActorCriticPolicy:
+    """The deterministic policy a checkpoint (or a ``policy.pt``) of A2C, PPO or DPPO holds, rebuilt from its spaces
+    and Config; one that recorded infinite action bounds (:func:`evaluated_unclipped`) gets the environment's."""
+    sp = ckpt["spaces"]
+    config = config_from_dict(config_cls, ckpt["config"])
+    agent = make_agent(sp, config)
+    agent.load_state_dict(ckpt["agent"])
+    to_np = lambda t: None if t is None else np.asarray(t)  # noqa: E731
+    low = np.array(sp["low"], dtype=np.float32) if "low" in sp else None
+    high = np.array(sp["high"], dtype=np.float32) if "high" in sp else None
+    if evaluated_unclipped(ckpt) and "env_id" in ckpt:  # ClipAction's +-inf: ask the environment
+        env = gym.make(ckpt["env_id"], **config.env_kwargs)
+        low, high = env.action_space.low.astype(np.float32), env.action_space.high.astype(np.float32)
+        env.close()
+    return ActorCriticPolicy(agent, to_np(ckpt.get("obs_mean")), to_np(ckpt.get("obs_var")),
+                             float(ckpt.get("obs_clip", OBS_CLIP)), low, high)

@@ -31,14 +31,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.buffers import gae
 from rlcore.checkpoint import load_checkpoint
 from rlcore.config import check_budget, check_config
 from rlcore.envs import make_env, pending_resets
 from rlcore.harness import Run, evaluation, running_stats, torch_rng
-from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, PPOPolicy, Rollout, annealing,  # noqa: F401
-                             check_spaces, collect_rollout, deterministic_policy, make_agent, make_envs, normalize,
-                             set_learning_rate, training_statistics, valid_batch)
+from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, Rollout, annealing,  # noqa: F401
+                             collect_rollout, deterministic_policy, gae, make_agent, make_envs, normalize,
+                             saved_policy, set_learning_rate, training_statistics, valid_batch)
+from rlcore.onpolicy import check_spaces as _check_spaces
 from rlcore.runs import RunDir
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
@@ -214,7 +214,7 @@ def ppo_update(model: nn.Module, optimizer: torch.optim.Optimizer, batch: dict[s
 @dataclass
 class Result:
     agent: ActorCritic
-    policy: PPOPolicy
+    policy: ActorCriticPolicy
     episode_returns: np.ndarray
     episode_end_steps: np.ndarray
     eval_steps: np.ndarray
@@ -225,6 +225,11 @@ class Result:
 UPDATE_COLUMNS = ["iteration", "step", "policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction",
                   "kl_coef", "learning_rate"]
 """The columns of a run's ``updates.csv``: one row per iteration."""
+
+
+def check_spaces(envs: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str, Any]:
+    """The on-policy core's check (flat observations; Discrete or flat Box actions), with PPO in its messages."""
+    return _check_spaces(envs, env_id, "PPO")
 
 
 def refuse_distributed(out: str | Path | None) -> None:
@@ -304,28 +309,6 @@ def make_config(algo: str, **overrides: Any) -> Config:
     return Config(**overrides)
 
 
-def evaluated_unclipped(ckpt: dict[str, Any]) -> bool:
-    """Whether the code that wrote this checkpoint (or saved policy) evaluated unclipped mean actions.
-
-    Before the deterministic policy clipped its actions, :func:`check_spaces` recorded ClipAction's +-inf
-    bounds, and the evaluations logged during training handed the raw Gaussian mean to the environment.
-    Such a run's ``eval.csv`` undercounts on tasks with a control cost; :func:`load_policy` fixes the policy.
-    """
-    sp = ckpt.get("spaces", {})
-    return "low" in sp and not (np.isfinite(sp["low"]).all() and np.isfinite(sp["high"]).all())
-
-
-def load_policy(ckpt: dict[str, Any]) -> PPOPolicy:
-    sp = ckpt["spaces"]
-    config = Config(**{k: v for k, v in ckpt["config"].items() if k in Config.__dataclass_fields__})
-    agent = make_agent(sp, config)
-    agent.load_state_dict(ckpt["agent"])
-    mean, var = ckpt.get("obs_mean"), ckpt.get("obs_var")
-    to_np = lambda t: None if t is None else t.numpy()  # noqa: E731
-    low = np.array(sp["low"], dtype=np.float32) if "low" in sp else None
-    high = np.array(sp["high"], dtype=np.float32) if "high" in sp else None
-    if evaluated_unclipped(ckpt) and "env_id" in ckpt:  # ClipAction's +-inf: ask the environment
-        env = gym.make(ckpt["env_id"], **config.env_kwargs)
-        low, high = env.action_space.low.astype(np.float32), env.action_space.high.astype(np.float32)
-        env.close()
-    return PPOPolicy(agent, to_np(mean), to_np(var), float(ckpt.get("obs_clip", 10.0)), low, high)
+def load_policy(ckpt: dict[str, Any]) -> ActorCriticPolicy:
+    """The deterministic policy of a checkpoint (the keys in POLICY_KEYS, plus its config); DPPO's too."""
+    return saved_policy(ckpt, Config)

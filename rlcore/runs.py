@@ -13,7 +13,7 @@ Every number the book shows can be traced back to these files.
 
 from __future__ import annotations
 
-import dataclasses
+import functools
 import json
 import os
 import platform
@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from rlcore.config import config_dict
 
 
 class RunDir:
@@ -107,13 +109,16 @@ def git_commit(cwd: str | os.PathLike | None = None) -> str | None:
         return None
 
 
-LOADED_COMMIT = git_commit()
-"""The checkout's commit when this process imported :mod:`rlcore.runs`, that is, the code it runs.
+@functools.cache
+def loaded_commit() -> str | None:
+    """The checkout's commit when this process first recorded a run (its first :func:`run_metadata`), taken as the
+    code it runs; asked once, so importing :mod:`rlcore.runs` runs no ``git``.
 
-A long-lived process (``experiments run`` training seed after seed) keeps running the code it loaded, even
-when the checkout moves on to new commits meanwhile. So a run records this commit, not the checkout's
-current one; where the two differ, :func:`run_metadata` records the latter as ``checkout_at_start``.
-"""
+    A long-lived process (``experiments run`` training seed after seed) keeps running the code it loaded, even
+    when the checkout moves on to new commits meanwhile. So a run records this commit, not the checkout's
+    current one; where the two differ, :func:`run_metadata` records the latter as ``checkout_at_start``.
+    """
+    return git_commit()
 
 
 def versions() -> dict[str, str]:
@@ -160,14 +165,18 @@ def torch_threads() -> int:
 
 
 def command_line() -> str | None:
-    """How this process was started, as a user would type it (``python -m rlcore ...`` for the CLI)."""
+    """How this process was started, as a user would type it: ``python -m rlcore ...`` for a module of a package
+    (``python -m rlcore train ...``, ``python -m rlbook experiments run ...``), else the script's name."""
     if not sys.argv or not sys.argv[0]:
         return None
     prog = Path(sys.argv[0]).resolve()
-    package = Path(__file__).resolve().parent
-    if prog.is_relative_to(package):  # python -m rlcore, python -m rlcore.experiments.versus, ...
-        module = ".".join(("rlcore", *prog.relative_to(package).with_suffix("").parts))
-        head = ["python", "-m", module.removesuffix(".__main__")]
+    package = [prog.stem] if prog.suffix == ".py" else []
+    folder = prog.parent
+    while (folder / "__init__.py").is_file():  # a module inside a package: its dotted name
+        package.insert(0, folder.name)
+        folder = folder.parent
+    if len(package) > 1:
+        head = ["python", "-m", ".".join(package).removesuffix(".__main__")]
     else:
         head = [prog.name]
     return shlex.join([*head, *sys.argv[1:]])
@@ -199,22 +208,23 @@ def cpu_model() -> str:
 def run_metadata(**extra: Any) -> dict[str, Any]:
     """What a result needs next to it: command, versions, commit, machine, time, plus ``extra``.
 
-    ``commit`` is :data:`LOADED_COMMIT`, the code this process runs; ``checkout_at_start`` is added when the
+    ``commit`` is :func:`loaded_commit`, the code this process runs; ``checkout_at_start`` is added when the
     checkout has moved on since this process loaded it.
     """
     import torch
 
+    loaded = loaded_commit()
     meta = {
         "command": command_line(),
         "versions": versions(),
-        "commit": LOADED_COMMIT,
+        "commit": loaded,
         "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpu": cpu_model(),
                     "cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()},
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         **extra,
     }
     now = git_commit()
-    if now != LOADED_COMMIT:
+    if now != loaded:
         meta["checkout_at_start"] = now
     return meta
 
@@ -284,19 +294,3 @@ def changed_settings(saved: dict[str, Any], current: dict[str, Any]) -> list[str
     norm = lambda v: json.dumps(v, sort_keys=True, default=str)  # noqa: E731
     return [f"{k}: {saved[k]!r} -> {current[k]!r}" for k in sorted(saved.keys() & current.keys())
             if k not in RESUMABLE_CHANGES and norm(saved[k]) != norm(current[k])]
-
-
-def config_dict(config: Any) -> dict[str, Any]:
-    """A dataclass Config as a JSON-ready dict."""
-    return dataclasses.asdict(config)
-
-
-def config_from_dict(cls: type, values: dict[str, Any]) -> Any:
-    """Rebuild a Config dataclass from :func:`config_dict`'s output, ignoring unknown keys."""
-    names = {f.name for f in dataclasses.fields(cls)}
-    return cls(**{k: v for k, v in values.items() if k in names})
-
-
-def episode_seed(seed: int, episode: int) -> int:
-    """The reset seed of episode ``episode`` of a run seeded ``seed`` (independent of interruptions)."""
-    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])

@@ -28,9 +28,8 @@ import gymnasium as gym
 import numpy as np
 
 from rlcore.config import check_budget, check_config
-from rlcore.envs import make_env
+from rlcore.envs import episode_seed, make_env
 from rlcore.harness import EPISODE_COLUMNS, Run, Saved
-from rlcore.runs import episode_seed
 from rlcore.schedules import linear_schedule
 
 METHODS = ("q-learning", "sarsa")

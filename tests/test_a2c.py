@@ -5,9 +5,9 @@ import torch
 from rlcore.a2c import (
     Config, advantage, entropy_bonus, load_policy, n_step_returns, policy_gradient_loss, train, value_loss,
 )
-from rlcore.buffers import gae
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
+from rlcore.onpolicy import gae
 from rlcore.ppo import ActorCritic
 
 

@@ -116,7 +116,7 @@ def test_new_transitions_get_the_max_priority():
 
 
 def test_gae_by_hand_with_lambda_one_is_discounted_return_minus_value():
-    from rlcore.buffers import gae
+    from rlcore.onpolicy import gae
 
     r = np.array([1.0, 2.0, 3.0])
     v = np.array([0.5, 0.5, 0.5])
@@ -128,7 +128,7 @@ def test_gae_by_hand_with_lambda_one_is_discounted_return_minus_value():
 
 
 def test_gae_lambda_zero_is_the_td_error():
-    from rlcore.buffers import gae
+    from rlcore.onpolicy import gae
 
     r, v, nv = np.array([1.0, 1.0]), np.array([2.0, 3.0]), np.array([3.0, 4.0])
     adv, _ = gae(r, v, nv, [0, 0], [0, 0], gamma=0.5, lam=0.0)
@@ -136,7 +136,7 @@ def test_gae_lambda_zero_is_the_td_error():
 
 
 def test_gae_truncated_episode_end_bootstraps_but_does_not_leak():
-    from rlcore.buffers import gae
+    from rlcore.onpolicy import gae
 
     # step 1 ends an episode by time limit (truncated): V(last obs) = 10 is bootstrapped;
     # step 2 starts a new episode whose advantage must not flow back into step 1
@@ -152,7 +152,7 @@ def test_gae_truncated_episode_end_bootstraps_but_does_not_leak():
 
 
 def test_gae_vectorized_over_envs():
-    from rlcore.buffers import gae
+    from rlcore.onpolicy import gae
 
     r = np.ones((4, 2))
     v = np.zeros((4, 2))

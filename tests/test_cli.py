@@ -194,6 +194,8 @@ BAD_INPUT = [
     (["evaluate", "runs/none", "--episodes", "0"], "--episodes: expected an integer >= 1, got 0"),
     (["render", "runs/none", "--out", "x.gif", "--frames", "0"], "--frames: expected an integer >= 1"),
     (["render", "runs/none", "--out", "x.gif", "--fps", "-3"], "--fps: expected an integer >= 1"),
+]
+BAD_EXPERIMENTS_INPUT = [  # python -m rlbook, the book's command line
     (["experiments", "run", "dqn-cartpole", "--jobs", "0"], "--jobs: expected an integer >= 1"),
     (["experiments", "run", "dqn-cartpole", "--seeds", "one"], "--seeds: expected comma-separated integers"),
     (["experiments", "run", "dqn-cartpole", "--only", "nope"], "dqn-cartpole has no run 'nope'"),
@@ -201,9 +203,13 @@ BAD_INPUT = [
 ]
 
 
-@pytest.mark.parametrize("args, message", BAD_INPUT, ids=[" ".join(a[:2] + a[-2:]) for a, _ in BAD_INPUT])
+@pytest.mark.parametrize("args, message", BAD_INPUT + BAD_EXPERIMENTS_INPUT,
+                         ids=[" ".join(a[:2] + a[-2:]) for a, _ in BAD_INPUT + BAD_EXPERIMENTS_INPUT])
 def test_every_bad_value_is_one_line_before_any_work(args, message, tmp_path, capsys, monkeypatch):
-    from rlcore.__main__ import main
+    if args[0] == "experiments":
+        from rlbook.__main__ import main
+    else:
+        from rlcore.__main__ import main
 
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "run"
@@ -219,6 +225,14 @@ def test_every_bad_value_is_one_line_before_any_work(args, message, tmp_path, ca
     assert not out.exists() and not (tmp_path / "runs").exists()  # refused before any work
 
 
+def test_the_library_points_to_the_book_for_experiments(capsys):
+    from rlcore.__main__ import main
+
+    assert main(["experiments", "run", "dqn-cartpole", "--jobs", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == "error: the book's experiments are run by `python -m rlbook experiments run dqn-cartpole --jobs 2`"
+
+
 def test_dppo_refuses_bad_values_the_same_way(tmp_path, capsys):
     from rlcore.dppo import main
 
@@ -231,7 +245,7 @@ def test_dppo_refuses_bad_values_the_same_way(tmp_path, capsys):
 
 
 def test_evaluate_and_render_take_a_results_folder_with_its_policy(frozenlake_run, tmp_path):
-    from rlcore.experiments.runner import export_policy
+    from rlbook.runner import export_policy
 
     seed_folder = tmp_path / "results" / "exp" / "variant" / "seed-0"  # as `experiments run` leaves it
     export_policy(frozenlake_run / "checkpoint.pt", seed_folder / "policy.pt")

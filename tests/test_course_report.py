@@ -1,11 +1,11 @@
-"""The report's DDPG tables as printed (rlcore.experiments.course_report) against the experiments that encode them."""
+"""The report's DDPG tables as printed (rlbook.course_report) against the experiments that encode them."""
 
 import pytest
 
+from rlbook import REPORT_DDPG, get_experiment
 from rlcore.ddpg import Config
-from rlcore.experiments import REPORT_DDPG, get_experiment
-from rlcore.experiments.course_report import (REPORT_DDPG_HUMANOID_TABLES, REPORT_DDPG_TABLES, REPORT_NAMES,
-                                              report_overrides, report_steps)
+from rlbook.course_report import (REPORT_DDPG_HUMANOID_TABLES, REPORT_DDPG_TABLES, REPORT_NAMES,
+                                  report_overrides, report_steps)
 
 
 def test_report_overrides_names_every_setting_in_rlcores_terms():

@@ -1,4 +1,4 @@
-"""rlcore.experiments.critic_trace: watching DDPG's critic without changing the run it watches."""
+"""rlbook.critic_trace: watching DDPG's critic without changing the run it watches."""
 
 import json
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
+from rlbook import critic_trace
 from rlcore import ddpg
-from rlcore.experiments import critic_trace
 from rlcore.offpolicy import Minibatch
 
 SMALL = dict(hidden=(32, 32), learning_starts=300, batch_size=32, buffer_size=5_000, eval_every=400,

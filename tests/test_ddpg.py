@@ -221,7 +221,7 @@ def test_normalize_obs_scales_what_the_networks_see_by_the_running_statistics(tm
     from rlcore.buffers import ReplayBuffer
     from rlcore.checkpoint import load_checkpoint
     from rlcore.ddpg import DeterministicPolicy
-    from rlcore.experiments import export_policy
+    from rlbook import export_policy
 
     cfg = Config(normalize_obs=True, **{**SMALL, "learning_starts": 100})
     result = train("Pendulum-v1", cfg, steps=400, seed=0, out=tmp_path / "run")

@@ -6,11 +6,11 @@ from rlcore.buffers import Batch
 from rlcore.dqn import (
     Config, check_spaces, double_dqn_target, dqn_target, load_policy, soft_update, td_loss, train, update,
 )
+from rlbook.overestimation import LookupQ as Table  # fixed Q-values per observation id
 from rlcore.checkpoint import load_checkpoint
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
 from rlcore.nets import DuelingQNetwork, QNetwork, dueling_aggregate, mlp
-from rlcore.overestimation import LookupQ as Table  # fixed Q-values per observation id
 
 
 def test_dqn_target_by_hand():

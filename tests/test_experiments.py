@@ -11,10 +11,10 @@ import numpy as np
 
 import pytest
 
-from rlcore import experiments as ex
+import rlbook as ex
 from rlcore.checkpoint import load_checkpoint
-from rlcore.evaluate import evaluate_policy
 from rlcore.envs import make_env
+from rlcore.evaluate import evaluate_policy
 
 
 @pytest.fixture
@@ -265,7 +265,7 @@ def test_load_or_train_falls_back_to_a_live_run_and_says_so(tiny, tmp_path):
     stored = ex.load_or_train("tiny", "dqn", fallback_steps=400, fallback_seeds=[5], results=results)
     assert stored.source == "results" and [s.seed for s in stored.seeds] == [0] and stored.steps == 600
     text = ex.provenance_markdown("tiny", stored)
-    assert "seeds [0] (1 of 1), 600 steps" in text and "python -m rlcore experiments run tiny" in text
+    assert "seeds [0] (1 of 1), 600 steps" in text and "python -m rlbook experiments run tiny" in text
     assert "{warning}" not in text and "loaded its code earlier" not in text
     # the record is folded under the figure, in a dropdown named after the run
     assert text.startswith(f"::::{{dropdown}} Provenance: {stored.label}\n") and text.rstrip().endswith("::::")
@@ -276,7 +276,7 @@ def test_load_or_train_falls_back_to_a_live_run_and_says_so(tiny, tmp_path):
 
 
 def test_report_metric_sums_rewards_per_epoch_over_the_last_epochs():
-    from rlcore.experiments import report_metric
+    from rlbook import report_metric
 
     # four 1000-step episodes in 2000-step epochs: each epoch collects two episodes' returns
     log = {"step": np.array([1000, 2000, 3000, 4000, 4500]), "episode_return": np.array([1.0, 2.0, 10.0, 20.0, 99.0])}

@@ -1,12 +1,12 @@
-"""The interquartile mean and its stratified-bootstrap interval (rlcore.experiments.analysis, through rliable),
+"""The interquartile mean and its stratified-bootstrap interval (rlbook.analysis, through rliable),
 checked against hand computations; and the per-seed scores the chapters feed it."""
 
 import numpy as np
 import pytest
 
+from rlbook import RunResults, RunSpec, SeedResult
+from rlbook.analysis import eval_curves, iqm_ci, iqm_difference_ci, second_half_means
 from rlcore.evaluate import iqm
-from rlcore.experiments import RunResults, RunSpec, SeedResult
-from rlcore.experiments.analysis import eval_curves, iqm_ci, iqm_difference_ci, second_half_means
 
 
 def test_iqm_is_the_mean_of_the_middle_half():

@@ -1,4 +1,4 @@
-"""rlcore.mujoco_analysis: small, fast cases with known answers."""
+"""rlbook.mujoco_analysis: small, fast cases with known answers."""
 
 import gymnasium as gym
 import numpy as np
@@ -8,7 +8,7 @@ import torch
 from rlcore.ddpg import Actor
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
-from rlcore.mujoco_analysis import (HUMANOID_V5_OBSERVATION, Episode, anatomy_row, fall_share, observation_scales,
+from rlbook.mujoco_analysis import (HUMANOID_V5_OBSERVATION, Episode, anatomy_row, fall_share, observation_scales,
                                     pitch_rollout, reward_anatomy, tanh_saturation, zero_torque_returns)
 
 
@@ -133,7 +133,7 @@ def test_tanh_saturation():
 
 
 def test_forward_velocity_and_share_from_an_anatomy():
-    from rlcore.mujoco_analysis import forward_share, forward_velocity
+    from rlbook.mujoco_analysis import forward_share, forward_velocity
 
     walking = {"reward_forward": 1_250.0, "length": 1_000.0, "return": 6_000.0}
     assert forward_velocity(walking, "Humanoid-v5") == pytest.approx(1.0)      # 1.25 per m/s
@@ -147,7 +147,7 @@ def test_forward_velocity_is_the_mean_x_velocity_of_the_episodes():
     import numpy as np
 
     from rlcore.envs import make_env
-    from rlcore.mujoco_analysis import forward_velocity, reward_anatomy
+    from rlbook.mujoco_analysis import forward_velocity, reward_anatomy
 
     rng = np.random.default_rng(0)
     policy = lambda obs: rng.uniform(-0.4, 0.4, 17)  # noqa: E731

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import torch
 
+from rlbook.overestimation import LookupQ, backup_bound, expected_max, mean_targets
 from rlcore.dqn import Config
-from rlcore.overestimation import LookupQ, backup_bound, expected_max, mean_targets
 
 
 def test_lookup_q_answers_from_its_table_by_the_first_observation_entry():

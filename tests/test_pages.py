@@ -1,12 +1,12 @@
-"""rlcore.experiments.pages: an experiment's runs as a chapter page loads, labels and describes them, and the check
+"""rlbook.pages: an experiment's runs as a chapter page loads, labels and describes them, and the check
 that results/ holds what the registry says."""
 
 import numpy as np
 import pytest
 
-from rlcore import experiments as ex
-from rlcore.experiments import pages
-from rlcore.experiments.pages import PageRuns, check_results
+import rlbook as ex
+from rlbook import pages
+from rlbook.pages import PageRuns, check_results
 
 SPECS = (ex.RunSpec("base", "dqn", "CartPole-v1", 100, (0, 1), {}, "Baseline"),
          ex.RunSpec("wide", "dqn", "CartPole-v1", 100, (0, 1), {"hidden": (8, 8), "double": True}, "Wide"))
@@ -54,7 +54,7 @@ def test_check_results_refuses_a_seed_that_differs_from_the_registry(small, chan
 
 
 def test_every_experiment_in_results_is_what_the_registry_says():
-    from rlcore import experiments as ex
+    import rlbook as ex
 
     for name in sorted(ex.EXPERIMENTS):
         check_results(name)
@@ -82,7 +82,7 @@ def test_page_runs_loads_each_run_once_and_says_where_it_comes_from(small, monke
     runs = PageRuns("small", fallback_steps=40, fallback_seeds=[5], eval_points=2, labels={"base": "B"})
     assert runs["base"] is runs["base"] and calls == [("small", "base", 40, (5,), 2)]   # loaded once
     assert runs.legend(runs["base"]) == "B" and runs.legend(runs["wide"]) == "Wide (short live run)"
-    assert runs.command == "python -m rlcore experiments run small --jobs 2" and set(runs.specs) == {"base", "wide"}
+    assert runs.command == "python -m rlbook experiments run small --jobs 2" and set(runs.specs) == {"base", "wide"}
     assert not runs.complete("base") and not runs.complete("wide")     # a seed missing; a live stand-in
     runs._loaded["base"] = _results()["base"]
     assert runs.complete("base") and not runs.complete("base", "wide")  # every seed, from results/
@@ -105,7 +105,7 @@ def test_page_runs_without_live_fallback_shows_what_results_has_and_says_what_is
 
 
 def test_printed_numbers_reads_signs_commas_decimals_and_skips_names():
-    from rlcore.experiments.pages import printed_numbers
+    from rlbook.pages import printed_numbers
 
     text = "PPO-v1 on Hopper-v5: 1,030 ± 21, −1,081 and +224; 2.1 % of 0.55–0.80. It is 41."
     assert [(n, v, d) for n, v, d in printed_numbers(text)] == [
@@ -114,7 +114,7 @@ def test_printed_numbers_reads_signs_commas_decimals_and_skips_names():
 
 
 def test_check_printed_passes_values_that_round_to_the_printed_numbers_and_returns_the_text():
-    from rlcore.experiments.pages import check_printed
+    from rlbook.pages import check_printed
 
     assert check_printed("1,030 ± 21", 1_029.6, 21.4) == "1,030 ± 21"
     check_printed("−1,081 against 2.1 %", -1_080.7, 2.14)
@@ -131,7 +131,7 @@ def test_check_printed_passes_values_that_round_to_the_printed_numbers_and_retur
     ("+224", (-224.0,), "+224"),
 ])
 def test_check_printed_names_each_stale_number(text, values, stale):
-    from rlcore.experiments.pages import check_printed
+    from rlbook.pages import check_printed
 
     with pytest.raises(AssertionError, match="stale numbers") as info:
         check_printed(text, *values)
@@ -139,14 +139,14 @@ def test_check_printed_names_each_stale_number(text, values, stale):
 
 
 def test_check_printed_refuses_another_count_of_values():
-    from rlcore.experiments.pages import check_printed
+    from rlbook.pages import check_printed
 
     with pytest.raises(AssertionError, match="prints 2 numbers"):
         check_printed("1,030 ± 21", 1_030.0)
 
 
 def test_check_printed_with_a_page_also_finds_the_sentence_there(tmp_path):
-    from rlcore.experiments.pages import check_printed
+    from rlbook.pages import check_printed
 
     page = tmp_path / "page.md"
     page.write_text("All three seeds end within 150 of\n1,000 (1,030 ±  21). More prose.\n", encoding="utf-8")

@@ -1,10 +1,10 @@
-"""rlcore.experiments.peers: reading the returns benchmark's records."""
+"""rlbook.peers: reading the returns benchmark's records."""
 import json
 
 import numpy as np
 import pytest
 
-from rlcore.experiments.peers import load_peer, peer_path
+from rlbook.peers import load_peer, peer_path
 
 
 def _record(env_id="Hopper-v5", seeds=(0, 1), final=((1.0, 3.0), (5.0, 7.0))):

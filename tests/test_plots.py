@@ -57,7 +57,7 @@ def test_plot_draws_each_seed_over_the_band_in_its_labels_colour():
 
 
 def test_plot_scaling_draws_one_speed_up_line_per_way_of_sharing_and_the_learning_curves(scaling_record):
-    from rlcore.plots import plot_scaling
+    from rlbook.record_plots import plot_scaling
 
     speed, curves = plot_scaling(scaling_record)
     lines = {line.get_label(): line for line in speed.get_lines()}
@@ -70,7 +70,7 @@ def test_plot_scaling_draws_one_speed_up_line_per_way_of_sharing_and_the_learnin
 def test_plot_critic_trace_draws_each_seed_s_targets_and_loss_and_the_reward_forever_line():
     import matplotlib.pyplot as plt
 
-    from rlcore.plots import plot_critic_trace
+    from rlbook.record_plots import plot_critic_trace
 
     steps = np.array([1.0, 501.0, 1001.0])
     record = {"seeds": {"1": {"learn_step": steps, "y_mean": np.array([5.0, 50.0, 400.0]),

@@ -5,9 +5,9 @@ import torch
 from rlcore import ppo
 from rlcore.envs import make_env
 from rlcore.evaluate import evaluate_policy
+from rlcore.onpolicy import evaluated_unclipped
 from rlcore.ppo import (
-    ActorCritic, Config, adaptive_kl_coef, approx_kl, clipped_surrogate, evaluated_unclipped, kl_penalty_surrogate,
-    load_policy, train,
+    ActorCritic, Config, adaptive_kl_coef, approx_kl, clipped_surrogate, kl_penalty_surrogate, load_policy, train,
 )
 
 

@@ -1,14 +1,14 @@
-"""rlcore.experiments.reevaluation: a run's final policies evaluated again, the clipping-fix check, and one policy
+"""rlbook.reevaluation: a run's final policies evaluated again, the clipping-fix check, and one policy
 run three ways."""
 
 import numpy as np
 import pytest
 import torch
 
-from rlcore import experiments as ex
+import rlbook as ex
 from rlcore.checkpoint import load_checkpoint, save_checkpoint
-from rlcore.experiments.reevaluation import (action_clipping_returns, final_policy_returns,
-                                             trained_before_clipping_fix)
+from rlbook.reevaluation import (action_clipping_returns, final_policy_returns,
+                                 trained_before_clipping_fix)
 from rlcore.evaluate import evaluate_policy
 from rlcore.ppo import Config, train
 from rlcore.runs import cpu_model
@@ -82,8 +82,8 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
     import json
     import shutil
 
-    from rlcore.__main__ import main
-    from rlcore.experiments import reevaluation
+    from rlbook import reevaluation
+    from rlbook.__main__ import main
 
     shutil.copytree(tiny_ppo.seeds[0].folder.parents[2], tmp_path / "results")  # a copy: the other tests' stays
     assert main(["experiments", "reevaluate", "tiny-ppo", "--episodes", "2", "--results",
@@ -119,7 +119,7 @@ def test_stored_computes_once_writes_only_when_asked_and_reads_back_the_same_par
     import json
     import shutil
 
-    from rlcore.experiments import reevaluation
+    from rlbook import reevaluation
 
     shutil.copytree(tiny_ppo.seeds[0].folder.parents[2], tmp_path / "results")
     seed = ex.load_experiment("tiny-ppo", tmp_path / "results")["ppo"].seeds[0]

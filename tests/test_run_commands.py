@@ -5,12 +5,12 @@ import json
 
 import pytest
 
-from rlcore import experiments as ex
-from rlcore.checkpoint import load_checkpoint
+import rlbook as ex
+from rlbook.runner import config_class, distributed_command
 from rlcore.a2c import Config as A2CConfig
+from rlcore.checkpoint import load_checkpoint
 from rlcore.cli import overrides, set_args, train_command
 from rlcore.dppo import Config
-from rlcore.experiments.runner import config_class, distributed_command
 
 
 def test_set_args_are_read_back_as_the_same_overrides():

@@ -1,12 +1,12 @@
-"""rlcore.experiments.analysis: the report's per-epoch curve and the per-seed numbers chapter 5 quotes."""
+"""rlbook.analysis: the report's per-epoch curve and the per-seed numbers chapter 5 quotes."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from rlcore.experiments import (RunResults, RunSpec, SeedResult, covers_epochs, final_returns, last_evals, mean_std,
-                                report_metric, reward_per_epoch)
+from rlbook import (RunResults, RunSpec, SeedResult, covers_epochs, final_returns, last_evals, mean_std,
+                    report_metric, reward_per_epoch)
 
 # Four training episodes ending at steps 500, 1500, 2000 and 2500 (returns 1, 2, 3, 30); epochs of 1000 steps.
 LOG = {"step": np.array([500, 1500, 2000, 2500]), "episode_return": np.array([1.0, 2.0, 3.0, 30.0])}

@@ -13,11 +13,22 @@ from rlcore import runs
 
 def test_a_process_records_the_commit_it_loaded_not_the_checkouts_later_one():
     # a long experiment process keeps the code it imported while the checkout moves on to new commits
-    code = ("import os, rlcore.runs as r; os.environ['RLCORE_COMMIT'] = 'later'; m = r.run_metadata(); "
-            "print(m['commit'], m['checkout_at_start'])")
+    # (the command lines ask for loaded_commit() as they start; a library user's first run_metadata() does)
+    code = ("import os, rlcore.runs as r; r.loaded_commit(); os.environ['RLCORE_COMMIT'] = 'later'; "
+            "m = r.run_metadata(); print(m['commit'], m['checkout_at_start'])")
     out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "RLCORE_COMMIT": "loaded"},
                          capture_output=True, text=True, check=True).stdout.split()
     assert out == ["loaded", "later"]
+
+
+def test_importing_the_library_runs_no_git():
+    code = ("import subprocess; calls = []; run = subprocess.run\n"
+            "subprocess.run = lambda *a, **k: calls.append(a) or run(*a, **k)\n"
+            "import rlcore.runs, rlcore.harness, rlcore.ddpg, rlcore.__main__\n"
+            "print(len(calls))")
+    env = {k: v for k, v in os.environ.items() if k != "RLCORE_COMMIT"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split()[-1] == "0"
 
 
 def test_no_checkout_field_while_the_checkout_is_what_was_loaded(tmp_path, monkeypatch):
@@ -25,7 +36,7 @@ def test_no_checkout_field_while_the_checkout_is_what_was_loaded(tmp_path, monke
     class Tiny:
         lr: float = 0.1
 
-    monkeypatch.setattr(runs, "LOADED_COMMIT", "abc")
+    monkeypatch.setattr(runs, "loaded_commit", lambda: "abc")
     monkeypatch.setattr(runs, "git_commit", lambda cwd=None: "abc")
     run, ckpt = runs.open_run(tmp_path / "run", "q-learning", "FrozenLake-v1", 0, 10, Tiny())
     meta = json.loads(run.meta.read_text())
@@ -110,14 +121,18 @@ def test_budget_and_seed_are_checked_before_anything_is_written(tmp_path):
 def test_the_recorded_command_names_the_module_a_user_would_run(monkeypatch):
     from pathlib import Path
 
+    import rlbook
     import rlcore
     from rlcore.runs import command_line
 
     package = Path(rlcore.__file__).resolve().parent
     monkeypatch.setattr("sys.argv", [str(package / "__main__.py"), "train", "dqn"])
     assert command_line() == "python -m rlcore train dqn"
-    monkeypatch.setattr("sys.argv", [str(package / "experiments" / "versus.py"), "--arm", "a b"])
-    assert command_line() == "python -m rlcore.experiments.versus --arm 'a b'"
+    book = Path(rlbook.__file__).resolve().parent
+    monkeypatch.setattr("sys.argv", [str(book / "versus.py"), "--arm", "a b"])
+    assert command_line() == "python -m rlbook.versus --arm 'a b'"
+    monkeypatch.setattr("sys.argv", [str(book / "__main__.py"), "experiments", "run", "x"])
+    assert command_line() == "python -m rlbook experiments run x"
     monkeypatch.setattr("sys.argv", ["/somewhere/benchmarks/ppo_vs_sb3.py", "--steps", "10"])
     assert command_line() == "ppo_vs_sb3.py --steps 10"
 

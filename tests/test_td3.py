@@ -119,7 +119,7 @@ def test_the_actor_is_updated_every_second_step(monkeypatch):
 
 
 def test_a_probe_sees_the_update_s_own_targets_and_changes_nothing():
-    from rlcore.experiments.critic_trace import CriticProbe
+    from rlbook.critic_trace import CriticProbe
 
     torch.set_num_threads(1)
     plain = td3.train("Pendulum-v1", td3.Config(**SMALL), steps=400, seed=2)

@@ -1,9 +1,9 @@
-"""rlcore.experiments.versus: two algorithms' stored runs measured the same way."""
+"""rlbook.versus: two algorithms' stored runs measured the same way."""
 
 import numpy as np
 import pytest
 
-from rlcore.experiments import versus
+from rlbook import versus
 
 
 def test_a_body_that_does_nothing_stays_upright_for_the_whole_episode():

@@ -15,27 +15,24 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
-from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, _META_KEYS, get_experiment, run_paths
+from rlbook import paths
+from rlbook.registry import RunSpec, get_experiment, run_paths
 
 
 def export_policy(checkpoint: str | os.PathLike, dest: str | os.PathLike) -> int:
     """Write only what :func:`load_policy` needs from ``checkpoint`` (no replay memory, no optimizer); returns the
     step the checkpoint was written at."""
     from rlcore.algos import get_algorithm
-    from rlcore.checkpoint import load_checkpoint, save_checkpoint
+    from rlcore.checkpoint import META_KEYS, load_checkpoint, save_checkpoint
 
     ckpt = load_checkpoint(checkpoint)
-    keys = (*_META_KEYS, *get_algorithm(ckpt["algo"]).POLICY_KEYS)
+    keys = (*META_KEYS, *get_algorithm(ckpt["algo"]).POLICY_KEYS)
     save_checkpoint(dest, {k: ckpt[k] for k in keys if k in ckpt and k not in ("format", "format_version")})
     return int(ckpt["step"])
 
 
 def config_class(algo: str) -> type:
-    """The Config dataclass of ``algo``: the command line's algorithms, and ``dppo`` (started by torchrun)."""
-    if algo == "dppo":
-        from rlcore.dppo import Config
-
-        return Config
+    """The Config dataclass of ``algo``, an algorithm of :mod:`rlcore.algos`."""
     from rlcore.algos import get_algorithm
 
     return get_algorithm(algo).Config
@@ -54,13 +51,14 @@ def distributed_command(spec: RunSpec, seed: int, out: str | os.PathLike) -> lis
     return torchrun_command(spec.workers, spec.env_id, spec.steps, seed, out, spec.overrides)
 
 
-def train_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> str:
-    """Train (or resume) one seed and copy its small outputs to ``results``; returns a status line."""
+def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, work: Path | None = None) -> str:
+    """Train (or resume) one seed in ``work`` and copy its small outputs to ``results`` (default: the book's
+    ``runs/`` and ``results/``, :mod:`rlbook.paths`); returns a status line."""
     from rlcore.algos import get_algorithm
     from rlcore.runs import torch_threads
 
     torch_threads()  # one per process unless RLCORE_TORCH_THREADS says more (one long run on an idle machine)
-    work_dir, result_dir = run_paths(exp, spec.name, seed, results, work)
+    work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
     if (result_dir / "policy.pt").exists():
         return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
     if spec.algo == "dppo":  # one process per worker, started by torchrun; each worker with one torch thread
@@ -95,7 +93,7 @@ def copy_logs(work_dir: Path, result_dir: Path) -> None:
             shutil.copy2(work_dir / name, result_dir / name)
 
 
-def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR,
+def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, work: Path | None = None,
                  policy: bool = False) -> str:
     """Copy the logs of a seed that is still training to ``results`` with a :data:`SNAPSHOT` record, so that a
     page can show how far a run of many sessions has come; returns a status line. With ``policy``, also the policy
@@ -109,7 +107,7 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR
     from rlcore.logger import read_csv
     from rlcore.runs import run_metadata
 
-    work_dir, result_dir = run_paths(exp, spec.name, seed, results, work)
+    work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
     where = f"{exp}/{spec.name}/seed-{seed}"
     if (result_dir / "policy.pt").exists():
         return f"{where}: finished, already in {result_dir}"
@@ -131,14 +129,18 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path = RESULTS_DIR
 
 
 def snapshot_experiment(name: str, only: list[str] | None = None, seeds: list[int] | None = None,
-                        results: Path = RESULTS_DIR, work: Path = WORK_DIR, policy: bool = False) -> list[str]:
+                        results: Path | None = None, work: Path | None = None, policy: bool = False) -> list[str]:
     """:func:`snapshot_one` for every chosen seed of an experiment."""
-    return [snapshot_one(name, spec, s, results, work, policy) for spec in chosen_runs(name, only)
+    chosen = chosen_runs(name, only)
+    results, work = results or paths.results_dir(), work or paths.work_dir()
+    return [snapshot_one(name, spec, s, results, work, policy) for spec in chosen
             for s in spec.seeds if seeds is None or s in seeds]
 
 
-def _train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: Path, work: Path,
-               progress: bool = True) -> list[str]:
+def train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: Path, work: Path,
+              progress: bool = True) -> list[str]:
+    """Train each ``(spec, seed)`` of ``tasks`` of experiment ``name`` with :func:`train_one`, ``jobs`` processes at a
+    time (:func:`run_in_pool`), with a progress bar over runs; returns their status lines."""
     from tqdm import tqdm
 
     lines: list[str] = []
@@ -203,11 +205,12 @@ def chosen_runs(name: str, only: list[str] | None = None) -> list[RunSpec]:
 
 
 def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
-                   results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
-    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time."""
+                   results: Path | None = None, work: Path | None = None) -> list[str]:
+    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time, in ``work`` with the small
+    outputs copied to ``results`` (default: the book's ``runs/`` and ``results/``, :mod:`rlbook.paths`)."""
     chosen = chosen_runs(name, only)
     tasks = [(spec, s) for spec in chosen for s in spec.seeds if seeds is None or s in seeds]
     if not tasks:
         known = sorted({s for spec in chosen for s in spec.seeds})
         raise ValueError(f"{name} has no seed {seeds} in the runs chosen; their seeds: {known}.")
-    return _train_all(name, tasks, jobs, results, work)
+    return train_all(name, tasks, jobs, results or paths.results_dir(), work or paths.work_dir())

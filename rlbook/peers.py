@@ -13,12 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from rlcore.experiments.registry import RESULTS_DIR
-from rlcore.experiments.results import commit_text
+from rlbook import paths
+from rlbook.results import commit_text
 
 
-def peer_path(env_id: str, results_dir: Path = RESULTS_DIR) -> Path:
+def peer_path(env_id: str, results_dir: Path | None = None) -> Path:
     """Where the returns benchmark writes its record for ``env_id`` (``HalfCheetah-v5`` -> ``...-halfcheetah.json``)."""
+    results_dir = paths.results_dir() if results_dir is None else results_dir
     return Path(results_dir) / "benchmarks" / f"ppo-returns-sb3-{env_id.split('-')[0].lower()}.json"
 
 
@@ -63,7 +64,7 @@ class PeerRuns:
                 "\n::::\n")
 
 
-def load_peer(env_id: str, results_dir: Path = RESULTS_DIR) -> PeerRuns | None:
+def load_peer(env_id: str, results_dir: Path | None = None) -> PeerRuns | None:
     """The record for ``env_id``, or None when there is none or it holds no finished seed yet."""
     path = peer_path(env_id, results_dir)
     if not path.exists():

@@ -1,6 +1,6 @@
 """The course report's DDPG settings and scores as it prints them, in its own names.
 
-The experiments in :mod:`rlcore.experiments.registry` encode these tables in ``rlcore``'s names;
+The experiments in :mod:`rlbook.registry` encode these tables in ``rlcore``'s names;
 ``tests/test_course_report.py`` checks that the two agree, so a chapter can print the report's tables and our runs'
 settings side by side, and quote the report's scores, from one place.
 """

@@ -1,12 +1,12 @@
 """Two algorithms' stored runs on one planar body, measured the same way: every seed's final deterministic policy
 (``policy.pt``) re-evaluated on the same start states, its return and whether it turned over (the flip detector of
-:func:`rlcore.mujoco_analysis.pitch_rollout`).
+:func:`rlbook.mujoco_analysis.pitch_rollout`).
 
 The course report concluded "PPO is better than DDPG; no PPO cheetah runs on its back". Its evidence was one
 seed's training curve per algorithm, each logged its own way. Here both are the same number (the deterministic
 policy's episode return, on episodes ``reset(seed=start + i)``), on the same episodes, at the same step budget::
 
-    python -m rlcore.experiments.versus --arm ppo-mujoco-1m/halfcheetah --arm ddpg-modern-1m/halfcheetah \\
+    python -m rlbook.versus --arm ppo-mujoco-1m/halfcheetah --arm ddpg-modern-1m/halfcheetah \\
         --episodes 10 --out results/comparisons/ppo-vs-ddpg-halfcheetah.json
 
 The record holds, per arm, every seed's returns, episode lengths and share of steps on its back, plus the
@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from rlcore.experiments.registry import RESULTS_DIR
-from rlcore.experiments.results import RunResults, load_experiment
+from rlbook import paths
+from rlbook.results import RunResults, load_experiment
 
 START_SEED = 50_000
 """Re-evaluation episodes start from ``reset(seed=START_SEED + i)``: states no training evaluation used."""
@@ -34,7 +34,7 @@ def measure_seed(policy: Any, env_id: str, episodes: int, start: int = START_SEE
     """``episodes`` episodes of one deterministic policy: return, length, share of steps on its back, and the
     first step on its back (None if it never turned over)."""
     from rlcore.envs import make_env
-    from rlcore.mujoco_analysis import pitch_rollout
+    from rlbook.mujoco_analysis import pitch_rollout
 
     env = make_env(env_id)
     try:
@@ -53,15 +53,17 @@ def measure_run(experiment: str, run: RunResults, episodes: int, start: int = ST
             "seeds": {str(s.seed): measure_seed(s.policy, run.spec.env_id, episodes, start) for s in run.seeds}}
 
 
-def compare(arms: list[str], episodes: int, start: int = START_SEED, results: Path = RESULTS_DIR) -> dict[str, Any]:
-    """Measure every ``experiment/run`` of ``arms`` (all on the same body, at the same step budget)."""
+def compare(arms: list[str], episodes: int, start: int = START_SEED, results: Path | None = None) -> dict[str, Any]:
+    """Measure every ``experiment/run`` of ``arms`` (all on the same body, at the same step budget), from ``results``
+    (default: the book's ``results/``, :mod:`rlbook.paths`)."""
+    results = paths.results_dir() if results is None else results
     runs = {}
     for arm in arms:
         experiment, _, name = arm.partition("/")
         stored = load_experiment(experiment, results)
         if name not in stored or not stored[name].seeds:
             raise ValueError(f"{arm}: no finished seeds in {results / experiment / name}; train them first "
-                             f"(python -m rlcore experiments run {experiment} --only {name})")
+                             f"(python -m rlbook experiments run {experiment} --only {name})")
         runs[arm] = (experiment, stored[name])
     bodies = {run.spec.env_id for _, run in runs.values()}
     budgets = {run.steps for _, run in runs.values()}
@@ -85,14 +87,14 @@ def flipped_episodes(record: dict[str, Any], arm: str, threshold: float = 0.0) -
 
 
 def load_comparison(path: str | Path) -> dict[str, Any]:
-    """A record written by ``python -m rlcore.experiments.versus``."""
+    """A record written by ``python -m rlbook.versus``."""
     return json.loads(Path(path).read_text())
 
 
 def main(argv: list[str] | None = None) -> int:
     from rlcore.runs import run_metadata, write_json
 
-    p = argparse.ArgumentParser(prog="python -m rlcore.experiments.versus", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m rlbook.versus", description=__doc__.split("\n\n")[0])
     p.add_argument("--arm", action="append", required=True, metavar="EXPERIMENT/RUN",
                    help="a stored run to measure (repeat: two or more)")
     p.add_argument("--episodes", type=int, default=10, help="episodes per seed (default 10)")

@@ -5,7 +5,7 @@ Training is deterministic per seed on one machine and thread count, so the re-ru
 keeps the re-run's evaluations beside the stored ones (:func:`matches_stored` compares them), and a page that shows
 the trace checks that they agree before it says anything about the stored run::
 
-    python -m rlcore.experiments.critic_trace ddpg-modern-1m/humanoid --seeds 1,2 --steps 100000 \\
+    python -m rlbook.critic_trace ddpg-modern-1m/humanoid --seeds 1,2 --steps 100000 \\
         --out results/diagnostics/ddpg-modern-1m-humanoid-critic.json
 
 A probe only reads what the critic update is given (:class:`CriticProbe`, passed to :func:`rlcore.ddpg.train`);
@@ -103,7 +103,7 @@ def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 50
     run, and ``algo`` trains it with another algorithm that takes those fields (``td3`` on a DDPG run: then it is a
     different run, and its evaluations will not match the stored ones)."""
     from rlcore.algos import get_algorithm
-    from rlcore.experiments.runner import chosen_runs
+    from rlbook.runner import chosen_runs
 
     spec = chosen_runs(experiment, [run])[0]
     algo = algo or spec.algo
@@ -122,7 +122,7 @@ def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 50
 def trace(experiment_run: str, seeds: list[int], steps: int, every: int = 500, progress: bool = False,
           changes: dict[str, Any] | None = None, algo: str | None = None) -> dict[str, Any]:
     """:func:`trace_seed` for each seed of ``experiment/run``, with what the run is."""
-    from rlcore.experiments.runner import chosen_runs
+    from rlbook.runner import chosen_runs
 
     experiment, _, run = experiment_run.partition("/")
     if not run:
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, overrides, seed_list
     from rlcore.runs import run_metadata, torch_threads, write_json
 
-    p = Parser(prog="python -m rlcore.experiments.critic_trace", description=__doc__.split("\n\n")[0])
+    p = Parser(prog="python -m rlbook.critic_trace", description=__doc__.split("\n\n")[0])
     p.add_argument("run", metavar="EXPERIMENT/RUN", help="a DDPG run of the registry, e.g. ddpg-modern-1m/humanoid")
     p.add_argument("--seeds", type=seed_list, required=True, help="comma-separated seeds, e.g. 1,2")
     p.add_argument("--steps", type=count(1), required=True, help="environment steps to re-train each seed for")

@@ -1,5 +1,6 @@
-"""Tabular methods over seeds: train one table per seed in worker processes that are started once and reused,
-evaluate every seed's greedy policy on separate episodes, and summarize, against the best any policy can do.
+"""Tabular methods over seeds, for a page's live runs: a pool of worker processes started once and reused
+(:class:`SeedPool`) trains one table per seed; every seed's greedy policy is evaluated on separate episodes and
+summarized against the best any policy can do.
 
     pool = SeedPool(workers=2)
     runs = train_seeds("FrozenLake-v1", Config(), steps=10_000, seeds=range(10), pool=pool)

@@ -1,6 +1,6 @@
 """A Q-table drawn on its grid world: the colour of a cell is the state value max_a Q(s, a), the arrow is the greedy
 action, a dot marks a state whose actions are all still tied (never updated), and holes, cliff cells and the goal
-are grey. Optionally, the path a greedy policy walks (:func:`rlcore.tabular_experiments.greedy_path`).
+are grey. Optionally, the path a greedy policy walks (:func:`rlbook.tabular_seeds.greedy_path`).
 """
 
 from __future__ import annotations

@@ -12,21 +12,6 @@ from pathlib import Path
 from typing import Any
 
 
-
-
-REPO_ROOT = Path(__file__).resolve().parent.parent.parent
-
-
-RESULTS_DIR = REPO_ROOT / "results"
-
-
-WORK_DIR = REPO_ROOT / "runs"
-
-
-# keys every checkpoint carries that say what it is; algorithm modules add their POLICY_KEYS
-_META_KEYS = ("algo", "env_id", "seed", "config", "step", "episode", "total_steps", "complete")
-
-
 @dataclass(frozen=True)
 class RunSpec:
     """One configuration of an experiment, trained once per seed."""
@@ -434,7 +419,11 @@ def get_experiment(name: str) -> Experiment:
     return EXPERIMENTS[name]()
 
 
-def run_paths(exp: str, run: str, seed: int, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> tuple[Path, Path]:
+def seed_folder(base: str | Path, exp: str, run: str, seed: int) -> Path:
+    """The folder of one seed of one run under ``base`` (``results/`` or ``runs/``): ``base/exp/run/seed-<seed>``."""
+    return Path(base) / exp / run / f"seed-{seed}"
+
+
+def run_paths(exp: str, run: str, seed: int, results: str | Path, work: str | Path) -> tuple[Path, Path]:
     """(work folder, results folder) of one seed of one run."""
-    rel = Path(exp) / run / f"seed-{seed}"
-    return Path(work) / rel, Path(results) / rel
+    return seed_folder(work, exp, run, seed), seed_folder(results, exp, run, seed)

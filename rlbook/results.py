@@ -15,8 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from rlcore.experiments.registry import RESULTS_DIR, WORK_DIR, RunSpec, get_experiment, run_paths
-from rlcore.experiments.runner import SNAPSHOT, SNAPSHOT_POLICY, _train_all, config_class
+from rlbook import paths
+from rlbook.registry import RunSpec, get_experiment, run_paths, seed_folder
+from rlbook.runner import SNAPSHOT, SNAPSHOT_POLICY, config_class, train_all
 from rlcore.logger import read_csv
 
 
@@ -32,7 +33,7 @@ class TemporaryFolder:
 @dataclass
 class SeedResult:
     """One finished seed: its logs, its config and metadata, and (loaded on first use) its policy; or, with
-    ``snapshot`` set, a seed still training: its logs so far (:func:`rlcore.experiments.runner.snapshot_one`)."""
+    ``snapshot`` set, a seed still training: its logs so far (:func:`rlbook.runner.snapshot_one`)."""
 
     seed: int
     folder: Path
@@ -110,7 +111,7 @@ def _read_seed(seed: int, folder: Path, snapshot: dict[str, Any] | None = None) 
 def _read_run(name: str, spec: RunSpec, results: Path) -> RunResults:
     found, missing, in_progress = [], [], []
     for s in spec.seeds:
-        _, folder = run_paths(name, spec.name, s, results)
+        folder = seed_folder(results, name, spec.name, s)
         if (folder / "policy.pt").exists():
             found.append(_read_seed(s, folder))
             continue
@@ -120,13 +121,15 @@ def _read_run(name: str, spec: RunSpec, results: Path) -> RunResults:
     return RunResults(spec, found, missing, in_progress=in_progress)
 
 
-def load_experiment(name: str, results: Path = RESULTS_DIR) -> dict[str, RunResults]:
-    """Everything ``results/`` holds for an experiment, with the seeds still missing listed per run."""
+def load_experiment(name: str, results: Path | None = None) -> dict[str, RunResults]:
+    """Everything ``results`` (default: the book's ``results/``, :mod:`rlbook.paths`) holds for an experiment, with
+    the seeds still missing listed per run."""
+    results = paths.results_dir() if results is None else results
     return {spec.name: _read_run(name, spec, results) for spec in get_experiment(name).runs}
 
 
 def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list[int], jobs: int = 2,
-                  eval_points: int = 10, results: Path = RESULTS_DIR) -> RunResults:
+                  eval_points: int = 10, results: Path | None = None) -> RunResults:
     """Run ``run`` of experiment ``name`` from ``results/``; if it has no seed there, a short live stand-in.
 
     The stand-in has the same settings with ``fallback_steps`` steps per seed (evaluated ``eval_points``
@@ -134,7 +137,8 @@ def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list
     with ``source="live"`` so that a page can say what it shows. The folder's run checkpoints are removed at once;
     its results (policies, logs) go when no seed of the stand-in is referenced any more, or when the process ends.
     """
-    found = _read_run(name, next(r for r in get_experiment(name).runs if r.name == run), results)
+    found = _read_run(name, next(r for r in get_experiment(name).runs if r.name == run),
+                      paths.results_dir() if results is None else results)
     if found.seeds:
         return found
     spec = found.spec
@@ -142,10 +146,10 @@ def load_or_train(name: str, run: str, fallback_steps: int, fallback_seeds: list
     if "eval_every" in config_class(spec.algo).__dataclass_fields__:
         overrides["eval_every"] = max(fallback_steps // eval_points, 1)
     live = dataclasses.replace(spec, steps=fallback_steps, seeds=tuple(fallback_seeds), overrides=overrides)
-    keep = TemporaryFolder(f"rlcore-live-{name}-")
+    keep = TemporaryFolder(f"rlbook-live-{name}-")
     tmp = keep.path
     try:
-        _train_all(name, [(live, s) for s in live.seeds], jobs, tmp / "results", tmp / "runs", progress=False)
+        train_all(name, [(live, s) for s in live.seeds], jobs, tmp / "results", tmp / "runs", progress=False)
     finally:
         shutil.rmtree(tmp / "runs", ignore_errors=True)
     out = _read_run(name, live, tmp / "results")
@@ -160,7 +164,7 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
 
     A live stand-in, or seeds still missing from ``results/``, get a visible warning.
     """
-    command = command or f"python -m rlcore experiments run {name} --jobs 2"
+    command = command or f"python -m rlbook experiments run {name} --jobs 2"
     full = next(r for r in get_experiment(name).runs if r.name == run.name)
     folder = f"results/{name}/{run.name}/"
     seeds = [s.seed for s in run.seeds]
@@ -264,8 +268,10 @@ def record_provenance_markdown(label: str, path: str, record: dict[str, Any], wh
             f"MuJoCo {v.get('mujoco')}, {prov['machine'].get('torch_threads', '?')} torch thread(s)). {what}\n::::\n")
 
 
-def status_lines(name: str, results: Path = RESULTS_DIR, work: Path = WORK_DIR) -> list[str]:
-    """One line per run: seeds finished in ``results``, and how far each unfinished one has trained in ``work``."""
+def status_lines(name: str, results: Path | None = None, work: Path | None = None) -> list[str]:
+    """One line per run: seeds finished in ``results``, and how far each unfinished one has trained in ``work``
+    (default: the book's ``results/`` and ``runs/``, :mod:`rlbook.paths`)."""
+    results, work = results or paths.results_dir(), work or paths.work_dir()
     lines = []
     for run, res in load_experiment(name, results).items():
         have = len(res.seeds)

@@ -13,10 +13,10 @@ import pytest  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 from matplotlib.text import Annotation  # noqa: E402
 
+from rlbook.tabular_plots import plot_table  # noqa: E402
+from rlbook.tabular_seeds import (SeedPool, episode_curves, evaluate_seeds, greedy_path,  # noqa: E402
+                                  optimal_q, summary_row, train_seeds)
 from rlcore.tabular import Config, train  # noqa: E402
-from rlcore.tabular_experiments import (SeedPool, episode_curves, evaluate_seeds, greedy_path,  # noqa: E402
-                                        optimal_q, summary_row, train_seeds)
-from rlcore.tabular_plots import plot_table  # noqa: E402
 from rlcore.wrappers import TimeoutAsTermination, register_timeout_as_termination  # noqa: E402
 
 DET = {"is_slippery": False}

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from rlcore.experiments.results import RunResults
+from rlbook.results import RunResults
 
 
 def first_step_reaching(evals: dict[str, np.ndarray], threshold: float) -> int | None:

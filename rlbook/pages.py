@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rlcore.experiments.registry import RunSpec, get_experiment
-from rlcore.experiments.results import RunResults, load_experiment, load_or_train, provenance_markdown
+from rlbook.registry import RunSpec, get_experiment
+from rlbook.results import RunResults, load_experiment, load_or_train, provenance_markdown
 
 
 @dataclass
@@ -28,7 +28,7 @@ class PageRuns:
 
     ``runs[run]`` loads run ``run`` on first use: every seed that ``results/`` holds, or, if it holds none, a
     short live stand-in of ``fallback_steps`` steps for each of ``fallback_seeds``, evaluated ``eval_points``
-    times (see :func:`rlcore.experiments.load_or_train`). With ``live_fallback=False`` (for runs too long to
+    times (see :func:`rlbook.load_or_train`). With ``live_fallback=False`` (for runs too long to
     train while a page builds) a run missing from ``results/`` stays empty, and :meth:`describe` says so.
     ``labels`` gives short legend labels by run name (default: the registry's label).
     """
@@ -44,7 +44,7 @@ class PageRuns:
     @property
     def command(self) -> str:
         """The command that makes the experiment's full-budget runs."""
-        return f"python -m rlcore experiments run {self.name} --jobs 2"
+        return f"python -m rlbook experiments run {self.name} --jobs 2"
 
     @property
     def specs(self) -> dict[str, RunSpec]:
@@ -66,7 +66,7 @@ class PageRuns:
 
     def describe(self, *runs: RunResults) -> str:
         """What to show under a figure of ``runs``: their provenance, folded (see
-        :func:`rlcore.experiments.provenance_markdown`); a live stand-in, missing seeds, or a run with no seed at
+        :func:`rlbook.provenance_markdown`); a live stand-in, missing seeds, or a run with no seed at
         all stay visible."""
         return "\n".join(self._missing(run) if not run.seeds and run.source == "results"
                          else provenance_markdown(self.name, run, self.command) for run in runs)

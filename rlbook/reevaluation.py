@@ -10,7 +10,7 @@ A policy's return is a chaotic function of the last bits of its actions, and tho
 (MKL takes other kernels on AMD than on Intel): a Hopper evaluated on one machine can fall where on another it
 hops. So the final policies' returns that the book quotes are evaluated once, by
 
-    python -m rlcore experiments reevaluate NAME            # writes seed-<s>/final-policy-returns.json
+    python -m rlbook experiments reevaluate NAME            # writes seed-<s>/final-policy-returns.json
 
 and stored beside each policy with the command, the commit and the processor; :func:`final_policy_returns`
 reads them (a stored record whose ``policy.pt`` has changed since is ignored), and evaluates now only where none
@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from rlcore.experiments.results import RunResults, SeedResult
+from rlbook.results import RunResults, SeedResult
 
 _FINALS: dict[tuple, Any] = {}
 FINAL = "final-policy-returns"
@@ -92,9 +92,9 @@ def stored_returns(s: SeedResult, env_id: str, episodes: int, first_reset_seed: 
 
 
 def stored_reward_anatomy(s: SeedResult, env_id: str, episodes: int, first_reset_seed: int) -> dict[str, float]:
-    """:func:`rlcore.mujoco_analysis.reward_anatomy` of ``s``'s final policy: :func:`stored` as ``reward-anatomy``,
+    """:func:`rlbook.mujoco_analysis.reward_anatomy` of ``s``'s final policy: :func:`stored` as ``reward-anatomy``,
     else computed now."""
-    from rlcore.mujoco_analysis import reward_anatomy
+    from rlbook.mujoco_analysis import reward_anatomy
 
     params = {"env_id": env_id, "episodes": episodes, "first_reset_seed": first_reset_seed}
     return stored(s, "reward-anatomy", params, lambda: reward_anatomy(s.policy, env_id, episodes, seed=first_reset_seed))
@@ -145,17 +145,17 @@ def store_final_policy_returns(run: RunResults, episodes: int = 5) -> list[Path]
 
 def trained_before_clipping_fix(run: RunResults) -> np.ndarray:
     """Per seed: whether its saved policy was written before PPO's deterministic policy clipped its actions
-    (:func:`rlcore.ppo.evaluated_unclipped`), so that the evaluations in its ``eval.csv`` paid the control cost
+    (:func:`rlcore.onpolicy.evaluated_unclipped`), so that the evaluations in its ``eval.csv`` paid the control cost
     on unclipped actions."""
     from rlcore.checkpoint import load_checkpoint
-    from rlcore.ppo import evaluated_unclipped
+    from rlcore.onpolicy import evaluated_unclipped
 
     return np.array([evaluated_unclipped(load_checkpoint(s.folder / "policy.pt")) for s in run.seeds], dtype=bool)
 
 
 def action_clipping_returns(policy: Any, env_id: str, episodes: int = 2, seed: int = 20_000,
                             sample_seed: int = 0) -> dict[str, float]:
-    """A PPO policy (:class:`rlcore.onpolicy.PPOPolicy`) run three ways on the same ``episodes`` start states:
+    """A PPO policy (:class:`rlcore.onpolicy.ActorCriticPolicy`) run three ways on the same ``episodes`` start states:
 
     - ``"clipped"``: the Gaussian's mean action clipped to the action space (what every evaluation does);
     - ``"unclipped"``: the mean action as the network gives it (what evaluations did before the fix);

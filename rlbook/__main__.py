@@ -1,0 +1,104 @@
+"""The book's command line: ``python -m rlbook experiments list | run | status | reevaluate | snapshot``.
+
+    python -m rlbook experiments list
+    python -m rlbook experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
+    python -m rlbook experiments status dqn-cartpole
+    python -m rlbook experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
+
+Training one agent, evaluating and rendering it are the library's: ``python -m rlcore train | evaluate | render``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, seed_list
+
+
+def cmd_experiments(args: argparse.Namespace) -> int:
+    import rlbook as ex
+    from rlbook import paths
+
+    if args.action == "list":
+        for name in sorted(ex.EXPERIMENTS):
+            exp = ex.get_experiment(name)
+            runs = sum(len(r.seeds) for r in exp.runs)
+            print(f"{name}: {exp.description} ({len(exp.runs)} configurations, {runs} runs)")
+        return 0
+    if not args.name:
+        raise ValueError(f"experiments {args.action} needs an experiment name; see `python -m rlbook experiments list`")
+    results = Path(args.results) if args.results else None
+    work = Path(args.work) if args.work else None
+    if args.root:  # else each step finds the book's folders itself (rlbook.paths), after checking its arguments
+        results, work = results or paths.results_dir(args.root), work or paths.work_dir(args.root)
+    if args.action == "reevaluate":
+        from rlbook.reevaluation import store_final_policy_returns
+
+        chosen = {spec.name for spec in ex.chosen_runs(args.name, args.only)}
+        for run_name, run in ex.load_experiment(args.name, results).items():
+            if run.seeds and run_name in chosen:
+                for path in store_final_policy_returns(run, episodes=args.episodes):
+                    print(f"Wrote {path}")
+        return 0
+    if args.action == "snapshot":
+        for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
+                                           work=work, policy=args.policy):
+            print(line)
+        return 0
+    if args.action == "run":
+        try:
+            lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
+                                      results=results, work=work)
+        except KeyboardInterrupt:
+            print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
+                  "when you run the same command again.", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        print("\n".join(lines))
+    print("\n".join(ex.status_lines(args.name, results, work)))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = Parser(prog="python -m rlbook", description="The book's full-budget experiments (resumable).")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
+    x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
+    x.add_argument("action", choices=["list", "run", "status", "reevaluate", "snapshot"],
+                   help="reevaluate: evaluate each finished seed's final policy and store its returns in results/; "
+                        "snapshot: copy the logs so far of seeds still training to results/ (with --policy, the "
+                        "policy of their last checkpoint too)")
+    x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
+    x.add_argument("--jobs", type=count(1), default=1, help="runs in parallel, one process each (one per core)")
+    x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
+    x.add_argument("--seeds", type=seed_list, help="comma-separated subset of the seeds, e.g. 0,1")
+    x.add_argument("--episodes", type=count(1), default=5, help="reevaluate: episodes per seed")
+    x.add_argument("--policy", action="store_true",
+                   help="snapshot: also the policy of each seed's last checkpoint (snapshot-policy.pt)")
+    x.add_argument("--root", help="the book's folder (default: RLBOOK_ROOT, else the checkout holding the current "
+                                  "folder); --results and --work default to its results/ and runs/")
+    x.add_argument("--results", help="where finished runs' small outputs go (default: ROOT/results)")
+    x.add_argument("--work", help="where runs train and keep full checkpoints (default: ROOT/runs)")
+    x.set_defaults(func=cmd_experiments)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    from rlcore.algos import UnknownAlgorithmError
+    from rlcore.checkpoint import CheckpointError
+    from rlcore.envs import UnknownEnvironmentError
+    from rlcore.render import HeadlessGLError
+    from rlcore.runs import loaded_commit, stop_on_signals
+
+    args = build_parser().parse_args(argv)
+    loaded_commit()  # the commit of the code this process loaded, which its runs record
+    stop_on_signals()  # a `kill` (SIGTERM) or Ctrl-C: checkpoint, then stop
+    try:
+        return args.func(args)
+    except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())
