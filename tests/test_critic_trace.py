@@ -105,8 +105,8 @@ def test_overestimation_is_the_mean_target_over_what_the_mean_reward_is_worth_fo
 
 def test_td3_on_a_ddpg_run_takes_every_setting_of_the_run_and_ddpg_s_noise():
     from rlcore import td3
-    from rlcore.experiments.critic_trace import settings_for
-    from rlcore.experiments.runner import chosen_runs
+    from rlbook.critic_trace import settings_for
+    from rlbook.runner import chosen_runs
 
     spec = chosen_runs("ddpg-modern-1m", ["humanoid"])[0]
     settings = settings_for("td3", spec)
