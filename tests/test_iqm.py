@@ -13,7 +13,10 @@ def test_iqm_is_the_mean_of_the_middle_half():
     # five seeds, one failed: the IQM drops the lowest and the highest and averages 300, 310, 320
     (point, _, _), = iqm_ci({"a": [330.0, 300.0, 0.0, 320.0, 310.0]}, reps=50).values()
     assert point == 310.0
-    assert np.mean([330.0, 300.0, 0.0, 320.0, 310.0]) == 252.0     # the mean is pulled down by the failed seed
+    # the failed seed does not pull it down (the mean, 252, would be): however badly it failed, the IQM stays 310
+    for failed in (-1000.0, 299.0):
+        assert iqm_ci({"a": [330.0, 300.0, failed, 320.0, 310.0]}, reps=50)["a"][0] == 310.0
+        assert iqm([330.0, 300.0, failed, 320.0, 310.0]) == 310.0
     # eight scores: the middle four, 2 + 3 + 4 + 5
     assert iqm_ci({"a": np.arange(8.0)}, reps=50)["a"][0] == 3.5
     # the same statistic as rlcore.evaluate.iqm, for any number of seeds
