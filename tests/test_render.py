@@ -39,10 +39,37 @@ def test_no_working_backend_names_what_to_install(monkeypatch, fake_system):
     assert "cannot open display" in msg
 
 
-def test_a_bogus_backend_really_fails_in_the_probe():
-    works, why = gl.probe_gl_backend("not-a-backend")
-    assert not works
-    assert why  # the reason is reported
+def test_the_probe_opens_a_context_with_that_backend_in_a_child_process_and_reports_its_last_error_line(
+        monkeypatch):
+    # rlcore's part of a probe, with the child process faked: what it runs, with which environment, and how it
+    # reads the outcome (whether MuJoCo itself refuses a backend is MuJoCo's business, not tested here)
+    runs = []
+
+    def fake_run(cmd, env, capture_output, text, timeout):
+        runs.append((cmd, env, timeout))
+        return outcome
+
+    monkeypatch.setattr(gl.subprocess, "run", fake_run)
+    monkeypatch.setenv("MUJOCO_GL", "glfw")
+    monkeypatch.setenv("PYOPENGL_PLATFORM", "osmesa")
+    outcome = subprocess.CompletedProcess([], 1, stdout="", stderr="Traceback\n  ...\nImportError: no libEGL\n")
+    assert gl.probe_gl_backend("egl", timeout=7) == (False, "ImportError: no libEGL")
+    (cmd, env, timeout), = runs
+    assert cmd[0] == sys.executable and "mujoco.GLContext" in cmd[-1] and "MjrContext" in cmd[-1]
+    assert (env["MUJOCO_GL"], env["PYOPENGL_PLATFORM"], timeout) == ("egl", "egl", 7)
+    assert os.environ["MUJOCO_GL"] == "glfw"   # this process's choice is left alone
+    outcome = subprocess.CompletedProcess([], 0, stdout="", stderr="")
+    assert gl.probe_gl_backend("glfw") == (True, "exit code 0")
+    assert runs[-1][1]["MUJOCO_GL"] == "glfw" and "PYOPENGL_PLATFORM" not in runs[-1][1]   # GLFW picks its own
+    outcome = subprocess.CompletedProcess([], -11, stdout="only stdout\n", stderr="")
+    assert gl.probe_gl_backend("osmesa") == (False, "only stdout")
+    assert runs[-1][1]["PYOPENGL_PLATFORM"] == "osmesa"
+
+    def hang(cmd, env, capture_output, text, timeout):
+        raise subprocess.TimeoutExpired(cmd, timeout)
+
+    monkeypatch.setattr(gl.subprocess, "run", hang)
+    assert gl.probe_gl_backend("egl", timeout=3) == (False, "timed out after 3 s")
 
 
 def test_first_working_backend_is_chosen(monkeypatch):
