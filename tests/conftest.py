@@ -37,16 +37,34 @@ def interrupt_at_first_checkpoint(monkeypatch):
     """``interrupt_at_first_checkpoint(module)``: the next ``module.train`` (every one runs in
     :class:`rlcore.harness.Run`, which writes the checkpoints) stops right after its first periodic
     checkpoint with a KeyboardInterrupt, as Ctrl-C would there, so that a test can resume it with the same budget
-    (a run whose budget shapes its schedules cannot be resumed with another one)."""
+    (a run whose budget shapes its schedules cannot be resumed with another one). Checkpoints written by any other
+    code (another module's ``train``) are written as usual. Returns the steps of ``module.train``'s checkpoints."""
 
     def arm(module):
+        import inspect
+        import sys
+
         import rlcore.harness
 
+        train = getattr(module, "train", None)
+        if not callable(train):
+            raise TypeError(f"interrupt_at_first_checkpoint: {module.__name__} has no train function")
+        train_code = inspect.unwrap(train).__code__
         real = rlcore.harness.save_checkpoint
         calls = []
 
+        def inside_train() -> bool:
+            frame = sys._getframe(2)
+            while frame is not None:
+                if frame.f_code is train_code:
+                    return True
+                frame = frame.f_back
+            return False
+
         def save_then_interrupt(path, state):
             real(path, state)
+            if not inside_train():
+                return
             calls.append(int(state["step"]))
             if len(calls) == 1:
                 raise KeyboardInterrupt
