@@ -29,7 +29,7 @@ import torch
 from torch import nn
 
 from rlcore.config import NON_NEGATIVE, check_budget, check_config
-from rlcore.ddpg import make_optimizers, saved_policy
+from rlcore.ddpg import Result, make_optimizers, saved_policy  # noqa: F401 (Result: what train returns)
 from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
 from rlcore.nets import soft_update
 from rlcore.noise import GaussianNoise, exploration_state
@@ -130,18 +130,6 @@ def delayed(step: int, policy_delay: int) -> bool:
     """Whether the actor and the targets are updated at this step: every d-th one."""
     return step % policy_delay == 0
 # [/td3-delayed]
-
-
-@dataclass
-class Result:
-    actor: nn.Module
-    critic: nn.Module
-    episode_returns: np.ndarray
-    episode_end_steps: np.ndarray
-    eval_steps: np.ndarray
-    eval_returns: np.ndarray
-    steps: int
-    policy: DeterministicPolicy
 
 
 def make_networks(sp: dict[str, Any], config: Config) -> tuple[Actor, nn.Module, Actor, nn.Module]:
