@@ -35,13 +35,21 @@ from rlcore.runs import cpu_model
 PINS = Path(__file__).parent / "data" / "pinned.json"
 
 SMALL_NETS = {"hidden": (32, 32)}
+DQN_LEARNS = {**SMALL_NETS, "learning_starts": 200, "train_freq": 4, "gradient_steps": 4, "target_update_interval": 50,
+              "exploration_fraction": 0.2}
+"""Short DQN runs that learn: one gradient step per environment step and a target copied every 50 steps lift
+CartPole's episodes from about 20 to about 75 within 1,500 steps, so a pin holds a run that learns (the pins
+recorded before, 1,500 steps at half the gradient steps with a target copied every 10, held episodes of about 10
+steps from the 12th on, the same trace for both variants)."""
+
+UNRECORDED = {"AuthenticAMD AMD EPYC (AVX512)": {"dqn", "dqn-per-double-dueling"}}
+"""Runs whose current definition a CPU has no pins for yet (they skip there): the DQN runs changed after that CPU's
+pins were added, and no such machine was at hand. ``--add-platform`` on one records them; then drop its entry."""
 RUNS = {
     "q-learning": ("rlcore.tabular", "FrozenLake-v1", 3_000, {"env_kwargs": {"is_slippery": False}}),
-    "dqn": ("rlcore.dqn", "CartPole-v1", 1_500, {**SMALL_NETS, "learning_starts": 200, "train_freq": 4,
-                                                "gradient_steps": 2, "eval_every": 500, "eval_episodes": 2}),
+    "dqn": ("rlcore.dqn", "CartPole-v1", 1_500, {**DQN_LEARNS, "eval_every": 500, "eval_episodes": 2}),
     "dqn-per-double-dueling": ("rlcore.dqn", "CartPole-v1", 1_500,
-                               {**SMALL_NETS, "learning_starts": 200, "train_freq": 4, "gradient_steps": 2,
-                                "eval_every": 0, "double": True, "dueling": True, "prioritized": True}),
+                               {**DQN_LEARNS, "eval_every": 0, "double": True, "dueling": True, "prioritized": True}),
     "a2c": ("rlcore.a2c", "CartPole-v1", 2_000, {**SMALL_NETS, "num_envs": 4, "eval_every": 1_000,
                                                 "eval_episodes": 2}),
     "ppo": ("rlcore.ppo", "Pendulum-v1", 1_024, {**SMALL_NETS, "num_envs": 2, "n_steps": 256, "batch_size": 64,
@@ -77,6 +85,14 @@ def recorded() -> dict[str, dict]:
     return json.loads(PINS.read_text())["platforms"]
 
 
+def write_pins(platforms: dict[str, dict]) -> None:
+    """Write ``{platform: {run name: fingerprint}}`` to ``pinned.json``, one line per run."""
+    PINS.parent.mkdir(exist_ok=True)
+    lines = [f"  {json.dumps(p)}: {{\n" + ",\n".join(f"   {json.dumps(k)}: {json.dumps(v)}" for k, v in runs.items())
+             + "\n  }" for p, runs in platforms.items()]
+    PINS.write_text('{\n "platforms": {\n' + ",\n".join(lines) + "\n }\n}\n")
+
+
 def this_cpus_pins() -> dict[str, dict]:
     """The pins recorded on this CPU with these kernels; where there are none, the test skips (fails on CI)."""
     platforms, here = recorded(), cpu_model()
@@ -88,7 +104,11 @@ def this_cpus_pins() -> dict[str, dict]:
 
 @pytest.mark.parametrize("name", list(RUNS))
 def test_default_training_is_unchanged(name, tmp_path):
-    pins = this_cpus_pins()[name]
+    pins = this_cpus_pins()
+    if name not in pins:
+        skip_or_fail(f"no pin of {name} recorded for this CPU ({cpu_model()}); record it with "
+                     "`python tests/test_pinned.py --add-platform` on an unchanged checkout")
+    pins = pins[name]
     got = fingerprint(name, tmp_path)
     assert got == pins, (f"{name}: the run does not reproduce the pins recorded on this CPU ({cpu_model()}). "
                          "A change to training re-records with `python tests/test_pinned.py --record`")
@@ -106,6 +126,20 @@ def test_a_cpu_without_pins_skips_and_says_how_to_record(monkeypatch):
         this_cpus_pins()
 
 
+def test_a_run_this_cpu_has_no_pin_for_skips_and_says_how_to_record(monkeypatch, tmp_path):
+    import test_pinned
+
+    platform, missing = next(iter(UNRECORDED.items()))
+    monkeypatch.delenv("CI", raising=False)
+    monkeypatch.setattr(test_pinned, "cpu_model", lambda: platform)
+    name = sorted(missing)[0]
+    with pytest.raises(pytest.skip.Exception, match=rf"no pin of {name} .*--add-platform"):
+        test_default_training_is_unchanged(name, tmp_path)
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match=f"no pin of {name}"):
+        test_default_training_is_unchanged(name, tmp_path)
+
+
 def test_kernels_chosen_by_the_environment_are_part_of_the_cpu(monkeypatch):
     monkeypatch.delenv("MKL_ENABLE_INSTRUCTIONS", raising=False)
     default = cpu_model()
@@ -115,7 +149,24 @@ def test_kernels_chosen_by_the_environment_are_part_of_the_cpu(monkeypatch):
 
 def test_every_platform_pins_every_run():
     for name, pins in recorded().items():
-        assert set(pins) == set(RUNS), name
+        assert set(pins) <= set(RUNS), name
+        assert set(RUNS) - set(pins) <= UNRECORDED.get(name, set()), name
+    assert all(any(run in pins for pins in recorded().values()) for run in RUNS)
+
+
+@pytest.mark.parametrize("name", ["dqn", "dqn-per-double-dueling"])
+def test_the_dqn_pins_hold_runs_that_learn(name):
+    """A pin of a run that never learns would pass for any loop that fails to learn too."""
+    for platform, pins in recorded().items():
+        if name in pins:
+            returns = np.array(pins[name]["returns"])
+            assert returns[-10:].mean() > 3 * returns[:10].mean(), (platform, returns)
+
+
+def test_the_two_dqn_pins_differ():
+    for platform, pins in recorded().items():
+        if "dqn" in pins and "dqn-per-double-dueling" in pins:
+            assert pins["dqn"]["returns"] != pins["dqn-per-double-dueling"]["returns"], platform
 
 
 if __name__ == "__main__" and ("--record" in sys.argv or "--add-platform" in sys.argv):
@@ -125,8 +176,5 @@ if __name__ == "__main__" and ("--record" in sys.argv or "--add-platform" in sys
         pins = {name: fingerprint(name, Path(tmp)) for name in RUNS}
     platforms = recorded() if "--add-platform" in sys.argv and PINS.exists() else {}
     platforms[cpu_model()] = pins
-    PINS.parent.mkdir(exist_ok=True)
-    lines = [f"  {json.dumps(p)}: {{\n" + ",\n".join(f"   {json.dumps(k)}: {json.dumps(v)}" for k, v in runs.items())
-             + "\n  }" for p, runs in platforms.items()]
-    PINS.write_text('{\n "platforms": {\n' + ",\n".join(lines) + "\n }\n}\n")
+    write_pins(platforms)
     print(f"recorded {len(pins)} pins for {cpu_model()} in {PINS} ({len(platforms)} CPUs in all)")
