@@ -181,6 +181,17 @@ def iqm_difference_ci(scores: Any, baseline: Any, reps: int = 2000, seed: int = 
 # [/iqm-ci]
 
 
+def fisher_exact(k1: int, n1: int, k2: int, n2: int) -> float:
+    """Two-sided p-value of Fisher's exact test that ``k1`` of ``n1`` and ``k2`` of ``n2`` come from one rate: with
+    the margins fixed, the probability of every split of the ``k1 + k2`` successes at most as likely as this one."""
+    from math import comb
+
+    k, n = k1 + k2, n1 + n2
+    prob = [comb(n1, x) * comb(n2, k - x) / comb(n, k) for x in range(max(0, k - n2), min(n1, k) + 1)]
+    seen = comb(n1, k1) * comb(n2, k2) / comb(n, k)
+    return min(1.0, sum(p for p in prob if p <= seen * (1 + 1e-9)))
+
+
 def scaling_runs(record: dict[str, Any]) -> dict[tuple[int, str], dict[str, Any]]:
     """``benchmarks/dppo_scaling.py``'s runs by (workers, way of sharing)."""
     return {(r["workers"], r.get("share", "gradients")): r for r in record["results"]}

@@ -73,3 +73,62 @@ def load_peer(env_id: str, results_dir: Path | None = None) -> PeerRuns | None:
     if record.get("env_id") != env_id:
         raise ValueError(f"{path} records {record.get('env_id')!r}, not {env_id!r}")
     return PeerRuns(record) if record.get("seeds") else None
+
+
+# --- DQN on CartPole: does it forget, or does rlcore's? -------------------------------------------------------
+
+
+def forgetting_path(results_dir: Path | None = None) -> Path:
+    """Where `benchmarks/dqn_forgetting_vs_sb3.py` writes its record."""
+    results_dir = paths.results_dir() if results_dir is None else results_dir
+    return Path(results_dir) / "benchmarks" / "dqn-forgetting-vs-sb3.json"
+
+
+@dataclass(frozen=True)
+class ForgettingRecord:
+    """rlcore's DQN and SB3's DQN on CartPole-v1 with the same RL-Zoo settings: each seed's final greedy policy on
+    fresh episodes (``benchmarks/dqn_forgetting_vs_sb3.py``)."""
+
+    record: dict[str, Any]
+
+    @property
+    def seeds(self) -> list[int]:
+        """The seeds both libraries finished, so that every comparison is over the same seeds."""
+        done = [{r["seed"] for r in self.record["runs"] if r["impl"] == impl} for impl in ("rlcore", "sb3")]
+        return sorted(done[0] & done[1])
+
+    def finals(self, impl: str) -> np.ndarray:
+        """Per seed (in :attr:`seeds` order): the mean return of ``impl``'s final policy on the fresh episodes."""
+        by_seed = {r["seed"]: np.mean(r["final_returns"]) for r in self.record["runs"] if r["impl"] == impl}
+        return np.array([by_seed[s] for s in self.seeds])
+
+    def holds(self, impl: str) -> np.ndarray:
+        """Per seed: whether ``impl``'s final policy averages at least the record's ``solved`` threshold."""
+        return self.finals(impl) >= self.record["solved"]
+
+    @property
+    def final_episodes(self) -> int:
+        counts = {len(r["final_returns"]) for r in self.record["runs"]}
+        if len(counts) != 1:
+            raise ValueError(f"runs have different final-evaluation lengths {sorted(counts)}")
+        return counts.pop()
+
+    def provenance_markdown(self) -> str:
+        """A collapsed MyST dropdown: seeds, steps, command, commits, versions, machine, evaluation."""
+        r, v = self.record, self.record["versions"]
+        commits = ", ".join(dict.fromkeys(commit_text(str(x["commit"])) for x in r["runs"]))
+        return (f"::::{{dropdown}} Provenance: rlcore's and Stable-Baselines3's DQN on {r['env_id']}\n"
+                f"*rlcore {v['rlcore']} and Stable-Baselines3 {v['stable_baselines3']}, seeds "
+                f"{self.seeds[0]}–{self.seeds[-1]} ({len(self.seeds)} each), {r['steps']:,} steps each, the same "
+                f"settings (rlcore's `dqn.Config()` defaults, the RL Zoo's): `{r['command']}` at commit {commits}; "
+                f"PyTorch {v['torch']}, Gymnasium {v['gymnasium']}, {r['machine']['cpu_model']}, one torch thread "
+                f"per run. Evaluation: {r['evaluation']}.*\n::::\n")
+
+
+def load_forgetting(results_dir: Path | None = None) -> ForgettingRecord | None:
+    """The record, or None when there is none or no seed that both libraries finished."""
+    path = forgetting_path(results_dir)
+    if not path.exists():
+        return None
+    record = ForgettingRecord(json.loads(path.read_text()))
+    return record if record.seeds else None

@@ -152,7 +152,8 @@ REPORT_DDPG_SWEEPS: dict[str, tuple[str, dict[str, Any], str]] = {
     "ant-no-explore": ("Ant-v5", {"exploration": "none"}, "no exploration noise (the report's 'DDPG')"),
     "halfcheetah-no-explore": ("HalfCheetah-v5", {"exploration": "none"}, "no exploration noise (its '+300')"),
     "halfcheetah-param-noise": ("HalfCheetah-v5", {"exploration": "param", "noise_sigma": 0.1},
-                                "adaptive parameter noise (initial std 0.1, target distance 0.2, as Baselines)"),
+                                "adaptive parameter noise (rlcore's: initial std 0.1, target distance 0.2 in action "
+                                "units, adapted once per episode, actor without layer norm)"),
     "halfcheetah-batch16": ("HalfCheetah-v5", {"batch_size": 16}, "batch size 16"),
     "halfcheetah-batch256": ("HalfCheetah-v5", {"batch_size": 256}, "batch size 256"),
     "hopper-hidden128": ("Hopper-v5", {"hidden": (128,)}, "one hidden layer of 128"),

@@ -7,6 +7,13 @@ One implementation, two objectives (``Config.objective``):
   (the course report's rule: beta <- alpha * beta if KL > beta_high * KL_target,
   beta <- beta / alpha if KL < beta_low * KL_target)
 
+The KL the rule reads is not the PPO paper's d. Schulman et al. (2017, section 4) compute d = E[KL[pi_old, pi]]
+after all of the iteration's epochs of updates. rlcore reads the mean, over the last epoch's minibatches, of the
+KL each minibatch measured on its own samples just *before* its own gradient step (:func:`ppo_update`): the last
+step's move is never measured, and the value lags the paper's d. With one minibatch per epoch (the report's Hopper
+runs: 128 samples, 20 epochs) it is the KL after 19 of the 20 steps; with one epoch of one minibatch it is always
+0 and beta shrinks by alpha every iteration. Stored runs (``results/ppo-report-hopper/kl``) were trained with this rule.
+
 with r_t = pi(a_t | s_t) / pi_old(a_t | s_t). The loop (Schulman et al. 2017, Algorithm 1):
 
     for each iteration:
@@ -14,7 +21,7 @@ with r_t = pi(a_t | s_t) / pi_old(a_t | s_t). The loop (Schulman et al. 2017, Al
         compute advantages with GAE(lambda), bootstrapping at time limits
         for n_epochs epochs, over shuffled minibatches:
             maximize the surrogate objective, minimize the value loss
-        (kl) adapt beta from the measured KL
+        (kl) adapt beta from the last epoch's KL, measured before each minibatch step (not after them all)
 
 Observations and rewards are normalized with Gymnasium's vector wrappers; the observation statistics
 travel with the policy, so evaluation sees observations exactly as training did.
@@ -182,7 +189,9 @@ def ppo_update(model: nn.Module, optimizer: torch.optim.Optimizer, batch: dict[s
     ``model(obs, actions)`` returns ``(log pi(a|s), entropy, V(s))``: an :class:`ActorCritic` or a
     ``DistributedDataParallel`` around one. ``n_batches`` minibatches per epoch (default: as many as
     ``batch_size`` allows). Returns the per-minibatch statistics (columns :data:`UPDATE_STATS`) and the
-    mean approximate KL over the last epoch (what the adaptive-KL rule reads).
+    mean approximate KL over the last epoch (what the adaptive-KL rule reads): each minibatch's KL is measured on
+    its samples before its own gradient step, so the mean misses the last step's move (the paper measures d after
+    all the updates; see the module docstring).
     """
     b_obs, b_act, b_logp, b_adv, b_ret = (batch[k] for k in ("obs", "act", "logp", "adv", "ret"))
     n = len(b_obs)

@@ -4,7 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from rlbook.peers import load_peer, peer_path
+from rlbook.analysis import fisher_exact
+from rlbook.peers import forgetting_path, load_forgetting, load_peer, peer_path
 
 
 def _record(env_id="Hopper-v5", seeds=(0, 1), final=((1.0, 3.0), (5.0, 7.0))):
@@ -59,3 +60,36 @@ def test_the_stored_halfcheetah_record_reads():
     peer = load_peer("HalfCheetah-v5")
     assert peer is not None and peer.seeds == [0, 1, 2] and peer.final_episodes == 10
     assert peer.final_returns().shape == (3,)
+
+
+def _forgetting(runs):
+    return {"env_id": "CartPole-v1", "steps": 50_000, "solved": 475, "command": "nice -n 10 python benchmarks/x.py",
+            "evaluation": "greedy", "machine": {"cpu_model": "Some CPU (AVX2)"},
+            "versions": {"rlcore": "0.1.0", "stable_baselines3": "2.9.2", "torch": "2.13.0+cpu", "gymnasium": "1.4.0"},
+            "runs": [{"impl": impl, "seed": seed, "final_returns": list(f), "commit": "abc1234def"}
+                     for impl, seed, f in runs]}
+
+
+def test_the_forgetting_record_compares_the_seeds_both_libraries_finished(tmp_path):
+    assert load_forgetting(tmp_path) is None
+    forgetting_path(tmp_path).parent.mkdir(parents=True)
+    forgetting_path(tmp_path).write_text(json.dumps(_forgetting([("sb3", 0, (500, 500))])))
+    assert load_forgetting(tmp_path) is None                      # no seed of rlcore's yet: nothing to compare
+    forgetting_path(tmp_path).write_text(json.dumps(_forgetting([
+        ("rlcore", 0, (500, 460)), ("rlcore", 1, (100, 120)), ("rlcore", 2, (500, 500)),
+        ("sb3", 1, (500, 500)), ("sb3", 0, (480, 480))])))
+    record = load_forgetting(tmp_path)
+    assert record.seeds == [0, 1] and record.final_episodes == 2  # rlcore's seed 2 has no SB3 partner yet
+    np.testing.assert_array_equal(record.finals("rlcore"), [480, 110])
+    np.testing.assert_array_equal(record.holds("rlcore"), [True, False])
+    np.testing.assert_array_equal(record.holds("sb3"), [True, True])
+    text = record.provenance_markdown()
+    assert "seeds 0–1 (2 each)" in text and "`nice -n 10 python benchmarks/x.py`" in text and "Some CPU" in text
+
+
+@pytest.mark.parametrize("table, p", [((4, 5, 2, 5), 11 / 21), ((10, 10, 3, 10), 0.0030959752321981), ((5, 10, 5, 10), 1.0),
+                                      ((0, 4, 4, 4), 2 / 70)])
+def test_fisher_exact_by_hand(table, p):
+    """By hand: the hypergeometric probabilities of every split at most as likely as the one seen, summed
+    (for 0 of 4 against 4 of 4: the two extreme splits, 1/70 each)."""
+    assert fisher_exact(*table) == pytest.approx(p, rel=1e-12)

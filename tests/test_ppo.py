@@ -247,3 +247,29 @@ def test_a_run_stopped_between_two_iterations_and_resumed_is_the_uninterrupted_r
     done = len(whole.episode_returns) - len(resumed.episode_returns)  # episodes ended before the stop
     assert len(resumed.episode_returns) > 0
     np.testing.assert_array_equal(whole.episode_returns[done:], resumed.episode_returns)
+
+
+def _kl_read_by_the_rule(n_epochs: int, n_batches: int) -> tuple[float, float]:
+    """(the KL ppo_update hands the adaptive rule, the KL of the whole batch after all the updates: the paper's d)."""
+    torch.manual_seed(0)
+    config = Config(objective="kl", n_steps=256, batch_size=256 // n_batches, n_epochs=n_epochs, learning_rate=1e-2,
+                    normalize_obs=False, normalize_reward=False)
+    envs = ppo.make_envs("Pendulum-v1", config, seed=0)
+    spaces = ppo.check_spaces(envs, "Pendulum-v1")
+    agent, buf = ppo.make_agent(spaces, config), ppo.Rollout(spaces, config.n_steps, config.num_envs)
+    obs, _ = envs.reset(seed=0)
+    ppo.collect_rollout(agent, envs, obs, buf)
+    batch = ppo.rollout_batch(buf, config)
+    _, read = ppo.ppo_update(agent, ppo.make_optimizer(agent, config), batch, config, 1.0, np.random.default_rng(0))
+    with torch.no_grad():
+        after = approx_kl(batch["logp"], agent(batch["obs"], batch["act"])[0]).item()
+    return read, after
+
+
+def test_the_adaptive_kl_rule_reads_the_kl_before_each_minibatch_step_not_the_papers_kl_after_the_update():
+    """What rlcore's docstring and chapter 6 say: the rule reads the mean over the last epoch's minibatches of the KL
+    each measured just before its own step, not the paper's d measured after all of the iteration's updates."""
+    read, after = _kl_read_by_the_rule(n_epochs=1, n_batches=1)
+    assert read == 0.0 and after > 1e-4, (read, after)   # one step: it reads KL(pi_old, pi_old); the step moved pi
+    read, after = _kl_read_by_the_rule(n_epochs=4, n_batches=1)
+    assert 0 < read < after, (read, after)                 # the KL after 3 of the 4 steps, below the one after all 4
