@@ -23,6 +23,24 @@ def peer_path(env_id: str, results_dir: Path | None = None) -> Path:
     return Path(results_dir) / "benchmarks" / f"ppo-returns-sb3-{env_id.split('-')[0].lower()}.json"
 
 
+def commits(runs: list[dict[str, Any]]) -> str:
+    """The distinct commits that made ``runs``, in order, as a page prints them."""
+    return ", ".join(dict.fromkeys(commit_text(str(r["commit"])) for r in runs))
+
+
+def dropdown(title: str, text: str) -> str:
+    """A collapsed MyST dropdown holding ``text`` in italics."""
+    return f"::::{{dropdown}} {title}\n*{text}*\n::::\n"
+
+
+def final_episode_count(runs: list[dict[str, Any]], what: str) -> int:
+    """The number of episodes in every run's ``final_returns``; a ValueError if ``what`` (the runs) differ."""
+    counts = {len(r["final_returns"]) for r in runs}
+    if len(counts) != 1:
+        raise ValueError(f"{what} have different final-evaluation lengths {sorted(counts)}")
+    return counts.pop()
+
+
 @dataclass(frozen=True)
 class PeerRuns:
     """One task's record of the returns benchmark."""
@@ -48,20 +66,16 @@ class PeerRuns:
     @property
     def final_episodes(self) -> int:
         """Episodes in each seed's final evaluation (the same for every seed of a record)."""
-        counts = {len(r["final_returns"]) for r in self.record["seeds"]}
-        if len(counts) != 1:
-            raise ValueError(f"{self.env_id}: seeds have different final-evaluation lengths {sorted(counts)}")
-        return counts.pop()
+        return final_episode_count(self.record["seeds"], f"{self.env_id}: seeds")
 
     def provenance_markdown(self) -> str:
         """A collapsed MyST dropdown: library version, seeds, steps, command, commits, versions, machine, evaluation."""
         r, v = self.record, self.record["versions"]
-        commits = ", ".join(dict.fromkeys(commit_text(str(s["commit"])) for s in r["seeds"]))
-        return (f"::::{{dropdown}} Provenance: Stable-Baselines3 on {self.env_id}\n"
-                f"*Stable-Baselines3 {v['stable_baselines3']}, seeds {', '.join(map(str, self.seeds))}, "
-                f"{r['steps']:,} steps each: `{r['command']}` at commit {commits}; PyTorch {v['torch']}, "
-                f"Gymnasium {v['gymnasium']}, {r['machine']['cpu_count']} CPUs. Its evaluation: {r['evaluation']}.*"
-                "\n::::\n")
+        return dropdown(f"Provenance: Stable-Baselines3 on {self.env_id}",
+                        f"Stable-Baselines3 {v['stable_baselines3']}, seeds {', '.join(map(str, self.seeds))}, "
+                        f"{r['steps']:,} steps each: `{r['command']}` at commit {commits(r['seeds'])}; PyTorch "
+                        f"{v['torch']}, Gymnasium {v['gymnasium']}, {r['machine']['cpu_count']} CPUs. Its evaluation: "
+                        f"{r['evaluation']}.")
 
 
 def load_peer(env_id: str, results_dir: Path | None = None) -> PeerRuns | None:
@@ -108,21 +122,18 @@ class ForgettingRecord:
 
     @property
     def final_episodes(self) -> int:
-        counts = {len(r["final_returns"]) for r in self.record["runs"]}
-        if len(counts) != 1:
-            raise ValueError(f"runs have different final-evaluation lengths {sorted(counts)}")
-        return counts.pop()
+        """Episodes in each run's final evaluation (the same for every run of the record)."""
+        return final_episode_count(self.record["runs"], "runs")
 
     def provenance_markdown(self) -> str:
         """A collapsed MyST dropdown: seeds, steps, command, commits, versions, machine, evaluation."""
         r, v = self.record, self.record["versions"]
-        commits = ", ".join(dict.fromkeys(commit_text(str(x["commit"])) for x in r["runs"]))
-        return (f"::::{{dropdown}} Provenance: rlcore's and Stable-Baselines3's DQN on {r['env_id']}\n"
-                f"*rlcore {v['rlcore']} and Stable-Baselines3 {v['stable_baselines3']}, seeds "
-                f"{self.seeds[0]}–{self.seeds[-1]} ({len(self.seeds)} each), {r['steps']:,} steps each, the same "
-                f"settings (rlcore's `dqn.Config()` defaults, the RL Zoo's): `{r['command']}` at commit {commits}; "
-                f"PyTorch {v['torch']}, Gymnasium {v['gymnasium']}, {r['machine']['cpu_model']}, one torch thread "
-                f"per run. Evaluation: {r['evaluation']}.*\n::::\n")
+        return dropdown(f"Provenance: rlcore's and Stable-Baselines3's DQN on {r['env_id']}",
+                        f"rlcore {v['rlcore']} and Stable-Baselines3 {v['stable_baselines3']}, seeds "
+                        f"{self.seeds[0]}–{self.seeds[-1]} ({len(self.seeds)} each), {r['steps']:,} steps each, the "
+                        f"same settings (rlcore's `dqn.Config()` defaults, the RL Zoo's): `{r['command']}` at commit "
+                        f"{commits(r['runs'])}; PyTorch {v['torch']}, Gymnasium {v['gymnasium']}, "
+                        f"{r['machine']['cpu_model']}, one torch thread per run. Evaluation: {r['evaluation']}.")
 
 
 def load_forgetting(results_dir: Path | None = None) -> ForgettingRecord | None:
