@@ -1,7 +1,7 @@
 """Returns, not speed: does DQN on CartPole-v1 forget with the RL-Zoo settings, or does rlcore's DQN?
 
     pip install -r requirements.txt -r benchmarks/requirements.txt
-    nice -n 10 python benchmarks/dqn_forgetting_vs_sb3.py --seeds 0-29 --jobs 2
+    nice -n 10 python benchmarks/dqn_forgetting_vs_sb3.py --seeds 0-9 --jobs 2
 
 rlcore's DQN and Stable-Baselines3's DQN train side by side with the same settings (rlcore's ``dqn.Config()``
 defaults, which are the RL Zoo's tuned CartPole-v1 values; SB3 gets them as keyword arguments), the same budget
@@ -126,7 +126,7 @@ def parse_seeds(text: str) -> list[int]:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--seeds", default="0-29")
+    p.add_argument("--seeds", default="0-9")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--out", default="results/benchmarks/dqn-forgetting-vs-sb3.json")
     args = p.parse_args()

@@ -42,9 +42,30 @@ def test_side_by_side_interleaves_the_runners_and_reports_the_median(script_modu
 
 
 @pytest.mark.parametrize("script", ["ddpg_vs_sb3", "ppo_vs_sb3", "dqn_vs_sb3", "ppo_returns_vs_sb3",
-                                    "checkpoint_cost", "humanoid_cost", "offpolicy_vs_sb3", "offpolicy_flops"])
+                                    "checkpoint_cost", "humanoid_cost", "offpolicy_vs_sb3", "offpolicy_flops",
+                                    "dqn_forgetting_vs_sb3"])
 def test_every_benchmark_writes_through_the_shared_record(script):
     from pathlib import Path
 
     text = (Path(__file__).resolve().parents[1] / "benchmarks" / f"{script}.py").read_text()
     assert "from record import" in text and "json.dumps" not in text
+
+
+def test_the_forgetting_benchmark_gives_sb3_every_setting_rlcore_trains_with(script_module):
+    """Like with like: each of rlcore's DQN settings reaches SB3's DQN under its SB3 name, with the same value."""
+    import inspect
+
+    bench = script_module("benchmarks/dqn_forgetting_vs_sb3.py")
+    s = bench.settings()
+    kw = bench.sb3_kwargs(s)
+    renamed = {"epsilon_start": "exploration_initial_eps", "epsilon_end": "exploration_final_eps"}
+    for key, value in s.items():
+        if key == "hidden":
+            assert kw["policy_kwargs"] == {"net_arch": value}
+        elif key == "huber":
+            assert value  # SB3's DQN loss is always the Huber loss
+        else:
+            assert kw[renamed.get(key, key)] == value, key
+    dqn = pytest.importorskip("stable_baselines3").DQN
+    assert set(kw) <= set(inspect.signature(dqn.__init__).parameters)
+    assert bench.parse_seeds("0-3,7") == [0, 1, 2, 3, 7]
