@@ -5,7 +5,11 @@
 
 rlcore's DQN and Stable-Baselines3's DQN train side by side with the same settings (rlcore's ``dqn.Config()``
 defaults, which are the RL Zoo's tuned CartPole-v1 values; SB3 gets them as keyword arguments), the same budget
-(50,000 steps, as the book's ``dqn-cartpole`` runs) and the same seeds. Every run is then judged the same way:
+(50,000 steps, as the book's ``dqn-cartpole`` runs) and the same seeds. The same budget means the same
+gradient steps: rlcore trains at every 256th step up to 50,000 (195 rounds, the last at step 49,920); SB3's
+``learn(total_timesteps=T)`` finishes every 256-step rollout it starts and trains after it, so T = 50,000 would give
+it 50,176 steps and a 196th round after the last evaluation. SB3 therefore gets T = 49,920 (:func:`sb3_steps`), and
+both final policies come after 195 rounds of 128 gradient steps. Every run is then judged the same way:
 its **final** greedy policy (SB3: ``predict(deterministic=True)``) plays ``FINAL_EPISODES`` fresh episodes with
 rlcore's evaluation loop (episode i from ``reset(seed=50_000 + i)``, the reset seeds chapter 2's re-evaluation
 starts from). During training both are evaluated the same way too, every 5,000 steps on 5 episodes (reset seeds
@@ -60,6 +64,11 @@ def sb3_kwargs(s: dict) -> dict:
             "policy_kwargs": {"net_arch": list(s["hidden"])}}
 
 
+def sb3_steps(s: dict) -> int:
+    """SB3's ``total_timesteps`` for as many rounds of updates as rlcore does in ``STEPS`` steps."""
+    return STEPS // s["train_freq"] * s["train_freq"]
+
+
 def final_returns(policy) -> list[float]:
     from rlcore.envs import make_env
     from rlcore.evaluate import evaluate_policy
@@ -99,7 +108,9 @@ def train_sb3(seed: int, s: dict) -> dict:
                                                                           seed + 10_000))))
             return True
 
-    model.learn(total_timesteps=STEPS, callback=Evaluate())
+    model.learn(total_timesteps=sb3_steps(s), callback=Evaluate())
+    if model.num_timesteps != sb3_steps(s):
+        raise RuntimeError(f"SB3 trained {model.num_timesteps:,} steps, not {sb3_steps(s):,}")
     return {"evals": evals, "final_returns": final_returns(policy)}
 
 
@@ -132,11 +143,11 @@ def main() -> None:
     args = p.parse_args()
     out, s = Path(args.out), settings()
     record = json.loads(out.read_text()) if out.exists() else {"runs": []}
-    if record["runs"] and record.get("settings") != s:
-        raise ValueError(f"{out} holds runs of other settings: choose another --out")
+    if record["runs"] and (record.get("settings"), record.get("sb3_total_timesteps")) != (s, sb3_steps(s)):
+        raise ValueError(f"{out} holds runs of other settings or another SB3 budget: choose another --out")
     record.update({
         "benchmark": "dqn-forgetting-vs-sb3", "env_id": ENV_ID, "steps": STEPS, "settings": s,
-        "sb3_settings": sb3_kwargs(s), "solved": SOLVED,
+        "sb3_settings": sb3_kwargs(s), "sb3_total_timesteps": sb3_steps(s), "solved": SOLVED,
         "evaluation": f"greedy (SB3: deterministic predict), every {EVAL_EVERY:,} steps on {EVAL_EPISODES} episodes "
                       f"(reset seeds seed + 10000 + i); the final policy on {FINAL_EPISODES} episodes (reset seeds "
                       f"{FINAL_SEED} + i); a seed holds when its final mean is >= {SOLVED}",
