@@ -9,7 +9,8 @@ defaults, which are the RL Zoo's tuned CartPole-v1 values; SB3 gets them as keyw
 gradient steps: rlcore trains at every 256th step up to 50,000 (195 rounds, the last at step 49,920); SB3's
 ``learn(total_timesteps=T)`` finishes every 256-step rollout it starts and trains after it, so T = 50,000 would give
 it 50,176 steps and a 196th round after the last evaluation. SB3 therefore gets T = 49,920 (:func:`sb3_steps`), and
-both final policies come after 195 rounds of 128 gradient steps. Every run is then judged the same way:
+both final policies come after 195 rounds of 128 gradient steps. (SB3's epsilon decays over a fraction of T, so over
+7,987 steps instead of rlcore's 8,000: a difference of 13 steps in the schedule, against one whole round of updates.) Every run is then judged the same way:
 its **final** greedy policy (SB3: ``predict(deterministic=True)``) plays ``FINAL_EPISODES`` fresh episodes with
 rlcore's evaluation loop (episode i from ``reset(seed=50_000 + i)``, the reset seeds chapter 2's re-evaluation
 starts from). During training both are evaluated the same way too, every 5,000 steps on 5 episodes (reset seeds
@@ -30,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from record import provenance, write_record  # noqa: E402
@@ -141,6 +143,7 @@ def main() -> None:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--out", default="results/benchmarks/dqn-forgetting-vs-sb3.json")
     args = p.parse_args()
+    torch.set_num_threads(1)   # as in every run (run_one), so that the record's machine says what the runs used
     out, s = Path(args.out), settings()
     record = json.loads(out.read_text()) if out.exists() else {"runs": []}
     if record["runs"] and (record.get("settings"), record.get("sb3_total_timesteps")) != (s, sb3_steps(s)):
