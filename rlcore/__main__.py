@@ -17,7 +17,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, json_object
+from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, json_object, run_command
 from rlcore.cli import overrides as overrides_of
 
 
@@ -140,25 +140,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rlcore.algos import UnknownAlgorithmError
-    from rlcore.checkpoint import CheckpointError
-    from rlcore.envs import UnknownEnvironmentError
-    from rlcore.render import HeadlessGLError
-
-    from rlcore.runs import loaded_commit, stop_on_signals
-
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["experiments"]:  # the book's experiments moved out of the library, into the book's package
         print(f"error: the book's experiments are run by `python -m rlbook {shlex.join(argv)}`", file=sys.stderr)
         return EXIT_USAGE
-    args = build_parser().parse_args(argv)
-    loaded_commit()  # the commit of the code this process loaded, which its runs record
-    stop_on_signals()  # a `kill` (SIGTERM) or Ctrl-C: checkpoint, then stop
-    try:
-        return args.func(args)
-    except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+    return run_command(build_parser().parse_args(argv))
 
 
 if __name__ == "__main__":

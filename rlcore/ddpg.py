@@ -29,7 +29,7 @@ from rlcore.nets import soft_update
 from rlcore.noise import exploration_state, first_behaviour, make_exploration, noise_sigma
 from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,  # noqa: F401
-                              OffPolicyConfig, OffPolicyLoop, Probe, frozen, make_replay)
+                              OffPolicyConfig, OffPolicyLoop, Probe, frozen, gradient_step, make_replay)
 from rlcore.offpolicy import check_spaces as _check_spaces
 from rlcore.offpolicy import make_envs as _make_envs
 
@@ -87,22 +87,14 @@ def update_critic(critic: nn.Module, critic_opt: torch.optim.Optimizer, actor_t:
                   terminated: torch.Tensor, gamma: float) -> float:
     """One Adam step on the critic's loss (1/N) sum (y_i - Q(s_i, a_i))^2, with y from the target networks."""
     y = critic_target(actor_t, critic_t, next_obs, rewards, terminated, gamma)
-    loss = critic_loss(critic, obs, actions, y)
-    critic_opt.zero_grad(set_to_none=True)
-    loss.backward()
-    critic_opt.step()
-    return float(loss.detach())
+    return gradient_step(critic_opt, critic_loss(critic, obs, actions, y))
 
 
 def update_actor(actor: nn.Module, actor_opt: torch.optim.Optimizer, critic: nn.Module, obs: torch.Tensor) -> float:
     """One Adam step along the deterministic policy gradient: the gradient flows through the critic into the actor
     only (the critic's weights get none: the next critic update would throw it away, so skipping it saves time)."""
     with frozen(critic):
-        loss = actor_loss(actor, critic, obs)
-        actor_opt.zero_grad(set_to_none=True)
-        loss.backward()
-    actor_opt.step()
-    return float(loss.detach())
+        return gradient_step(actor_opt, actor_loss(actor, critic, obs))
 # [/ddpg-update]
 
 

@@ -7,8 +7,9 @@
   :class:`TwinCritic` (Q_1 and Q_2 as one module: each layer of both in one batched matrix product);
 - :class:`Observations`: raw observations, or scaled by running statistics (``normalize_obs``);
   :class:`DeterministicPolicy`: the policy a run saves;
-- :class:`Minibatch` and :func:`frozen`; :class:`OffPolicyLoop`: the loop every off-policy ``train`` runs (act,
-  store, reset at an episode's end, learn from a minibatch), with the plumbing in the harness's :class:`Run`.
+- :class:`Minibatch`; :func:`gradient_step`, one optimizer step on a loss; :func:`frozen`;
+- :class:`OffPolicyLoop`: the loop every off-policy ``train`` runs (act, store, reset at an episode's end, learn from
+  a minibatch), with the plumbing in the harness's :class:`Run`.
 
 An algorithm module keeps what is its own: its networks' losses and updates, how it explores, and what it learns
 from one minibatch. Its ``train`` reads like its algorithm box::
@@ -221,6 +222,15 @@ class SeparateTwinCritics(nn.Module):
 def min_q(q: torch.Tensor) -> torch.Tensor:
     """min_j Q_j: the smaller estimate of a twin critic's (2, N) output; a single critic's (N,) as it is."""
     return q.min(dim=0).values if q.dim() == 2 else q
+
+
+def gradient_step(optimizer: torch.optim.Optimizer, loss: torch.Tensor) -> float:
+    """One step of ``optimizer`` down the gradient of ``loss``: clear the old gradients, backpropagate, step.
+    Returns the loss, as a float."""
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    optimizer.step()
+    return float(loss.detach())
 
 
 @contextlib.contextmanager

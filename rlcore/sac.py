@@ -42,7 +42,8 @@ from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
 from rlcore.nets import mlp, soft_update
 from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, DeterministicPolicy, Minibatch, Observations, OffPolicyConfig,
-                              OffPolicyLoop, TwinCritic, box_buffers, frozen, make_envs, make_replay, min_q)
+                              OffPolicyLoop, TwinCritic, box_buffers, frozen, gradient_step, make_envs,
+                              make_replay, min_q)
 
 POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -236,20 +237,12 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         # [sac-learn]
         alpha = float(log_alpha.detach().exp())
         y = soft_target(actor, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma, alpha)
-        loss = critic_loss(critic, mb.obs, mb.actions, y)
-        critic_opt.zero_grad(set_to_none=True)
-        loss.backward()
-        critic_opt.step()
+        gradient_step(critic_opt, critic_loss(critic, mb.obs, mb.actions, y))
         with frozen(critic):
             loss, logp = actor_loss(actor, critic, mb.obs, alpha)
-            actor_opt.zero_grad(set_to_none=True)
-            loss.backward()
-        actor_opt.step()
+            gradient_step(actor_opt, loss)
         if config.autotune:
-            loss = temperature_loss(log_alpha, logp, target_entropy)
-            alpha_opt.zero_grad(set_to_none=True)
-            loss.backward()
-            alpha_opt.step()
+            gradient_step(alpha_opt, temperature_loss(log_alpha, logp, target_entropy))
         soft_update(critic_t, critic, config.tau)
         # [/sac-learn]
         entropy[0] = -float(logp.mean())

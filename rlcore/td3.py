@@ -35,8 +35,8 @@ from rlcore.nets import soft_update
 from rlcore.noise import GaussianNoise, exploration_state
 from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,
-                              OffPolicyConfig, OffPolicyLoop, Probe, TwinCritic, frozen, make_envs, make_replay,
-                              min_q)
+                              OffPolicyConfig, OffPolicyLoop, Probe, TwinCritic, frozen, gradient_step, make_envs,
+                              make_replay, min_q)
 
 POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -108,21 +108,13 @@ def actor_loss(actor: nn.Module, critic: nn.Module, obs: torch.Tensor) -> torch.
 
 def update_critics(critic: nn.Module, critic_opt: torch.optim.Optimizer, y: torch.Tensor, mb: Minibatch) -> float:
     """One Adam step on both critics' loss toward the target y."""
-    loss = critic_loss(critic, mb.obs, mb.actions, y)
-    critic_opt.zero_grad(set_to_none=True)
-    loss.backward()
-    critic_opt.step()
-    return float(loss.detach())
+    return gradient_step(critic_opt, critic_loss(critic, mb.obs, mb.actions, y))
 
 
 def update_actor(actor: nn.Module, actor_opt: torch.optim.Optimizer, critic: nn.Module, obs: torch.Tensor) -> float:
     """One Adam step along the deterministic policy gradient through Q_1 (the critics get no gradient)."""
     with frozen(critic):
-        loss = actor_loss(actor, critic, obs)
-        actor_opt.zero_grad(set_to_none=True)
-        loss.backward()
-    actor_opt.step()
-    return float(loss.detach())
+        return gradient_step(actor_opt, actor_loss(actor, critic, obs))
 
 
 # [td3-delayed]
