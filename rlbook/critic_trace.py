@@ -179,7 +179,9 @@ def first_runaway(seed_trace: dict[str, Any], gamma: float, factor: float = 10.0
 
 def main(argv: list[str] | None = None) -> int:
     from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, overrides, seed_list
-    from rlcore.runs import run_metadata, torch_threads, write_json
+    from rlcore.machine import torch_threads
+    from rlcore.provenance import run_metadata
+    from rlcore.runs import write_json
 
     p = Parser(prog="python -m rlbook.critic_trace", description=__doc__.split("\n\n")[0])
     p.add_argument("run", metavar="EXPERIMENT/RUN", help="a DDPG run of the registry, e.g. ddpg-modern-1m/humanoid")

@@ -65,7 +65,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.env_kwargs is not None:
         overrides["env_kwargs"] = args.env_kwargs
     config = module.make_config(args.algo, **overrides)
-    from rlcore.runs import torch_threads
+    from rlcore.machine import torch_threads
 
     torch_threads()  # one unless RLCORE_TORCH_THREADS says more
     try:

@@ -30,7 +30,7 @@ from torch import nn
 
 from rlcore.config import check_budget, check_config
 from rlcore.envs import make_env, pending_resets
-from rlcore.harness import Run, evaluation, running_stats, torch_rng
+from rlcore.harness import Evaluation, Run, evaluation, running_stats, torch_rng
 from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, Rollout, annealing,  # noqa: F401
                              collect_rollout, deterministic_policy, gae, make_agent, make_envs, normalize,
                              saved_policy, set_learning_rate, training_statistics, valid_batch)
@@ -234,19 +234,19 @@ def train(
     per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)
     run = Run("a2c", env_id, config, steps, seed, out, progress, desc=f"A2C {env_id}", target=iterations * per_iter,
-              schedules=annealing(config), eval_at_end=True, close=(envs, eval_env),
-              evaluate=lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
-                                          config.eval_episodes, seed + 10_000),
-              logs={"updates": UPDATE_COLUMNS}, defer_interrupts=True)
-    run.track(agent=agent, optimizer=optimizer, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
-              ret=running_stats(ret_rms, "ret"), spaces=spaces, obs_clip=OBS_CLIP)
+              schedules=annealing(config), close=(envs, eval_env), logs={"updates": UPDATE_COLUMNS},
+              evaluation=Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
+                                                       config.eval_episodes, seed + 10_000), at_end=True))
+    run.restores(agent=agent, optimizer=optimizer, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
+                 ret=running_stats(ret_rms, "ret"))
+    run.records(spaces=spaces, obs_clip=OBS_CLIP)
     step, iteration = run.resume(step=0, iteration=0)
     buf = Rollout(spaces, config.n_steps, config.num_envs)
 
     def on_episode(t: int, episode_return: float, length: int) -> None:  # an episode ended at rollout step t
         run.record_episode(step + (t + 1) * config.num_envs, episode_return, length)
 
-    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration, observation=lambda: obs)
+    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration)
     buf.ended = pending_resets(envs)  # the copies whose episode ended on the step before the checkpoint
     with run:
         while iteration < iterations:
@@ -263,7 +263,7 @@ def train(
             # [/a2c-loop]
             if iteration % config.log_every == 0 or iteration == iterations:
                 run.log("updates", iteration=iteration, step=step, learning_rate=lr, **stats)
-            run.step_done(step, step - per_iter, iteration=iteration)
+            run.step_done(step, step - per_iter, obs, iteration=iteration)
     return Result(agent, deterministic_policy(agent, spaces, obs_rms), run.episode_returns, run.episode_end_steps,
                   run.eval_steps, run.eval_returns, step)
 

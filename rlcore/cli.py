@@ -62,7 +62,8 @@ def run_command(args: argparse.Namespace) -> int:
     from rlcore.checkpoint import CheckpointError
     from rlcore.envs import UnknownEnvironmentError
     from rlcore.render import HeadlessGLError
-    from rlcore.runs import loaded_commit, stop_on_signals
+    from rlcore.provenance import loaded_commit
+    from rlcore.signals import stop_on_signals
 
     loaded_commit()
     stop_on_signals()

@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from rlcore.config import check_budget, check_config
-from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
+from rlcore.harness import EPISODE_COLUMNS, Evaluation, Run, evaluation, torch_rng
 from rlcore.nets import soft_update
 from rlcore.noise import exploration_state, first_behaviour, make_exploration, noise_sigma
 from rlcore.offpolicy import saved_actor
@@ -159,13 +159,13 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     observations = Observations(sp["obs_dim"], config.normalize_obs)  # raw, or scaled by running statistics
 
     run = Run("ddpg", env_id, config, steps, seed, out, progress, desc=f"DDPG {env_id}", close=(env, eval_env),
-              evaluate=lambda: evaluation(saved_policy(actor, observations), eval_env, config.eval_episodes,
-                                          seed + 10_000),
-              episode_log=EPISODE_COLUMNS + ["noise_sigma"], defer_interrupts=True)
-    run.track(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
-              critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
-              torch_rng=torch_rng(), noise=exploration_state(noise, param_noise, actor), spaces=sp,
-              obs=observations.saved())
+              episode_log=EPISODE_COLUMNS + ["noise_sigma"],
+              evaluation=Evaluation(lambda: evaluation(saved_policy(actor, observations), eval_env,
+                                                       config.eval_episodes, seed + 10_000)))
+    run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
+                 critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
+                 torch_rng=torch_rng(), noise=exploration_state(noise, param_noise, actor), obs=observations.saved())
+    run.records(spaces=sp)
     loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
     loop.resume()
     behaviour = first_behaviour(actor, param_noise)

@@ -279,7 +279,7 @@ class DeterministicPolicy:
     observation scaled by training's statistics (normalize_obs)."""
 
     def __init__(self, actor: nn.Module, obs_mean=None, obs_var=None):
-        self.actor = actor.eval()
+        self.actor = actor
         self.obs_mean = None if obs_mean is None else np.asarray(obs_mean)
         self.obs_var = None if obs_var is None else np.asarray(obs_var)
 
@@ -344,8 +344,7 @@ class OffPolicyLoop:
         """Restore what the run tracks from its checkpoint (if any), and the episode in progress; the step to go
         on from."""
         self.step, self.episode = self.run.resume(step=0, episode=0)
-        self.obs = self.run.resume_episode(self.env, reset_seed=episode_seed(self.seed, self.episode),
-                                           observation=lambda: self.obs)
+        self.obs = self.run.resume_episode(self.env, reset_seed=episode_seed(self.seed, self.episode))
         return self.step
 
     def run_until(self, steps: int, act: Callable[[np.ndarray], np.ndarray], learn: Callable[[int, Minibatch], None],
@@ -375,7 +374,7 @@ class OffPolicyLoop:
                 if self.step >= config.learning_starts:
                     learn(self.step, Minibatch.sample(self.buffer, config.batch_size, self.observations))
                 # [/offpolicy-loop]
-                run.step_done(self.step, self.step - 1, episode=self.episode)
+                run.step_done(self.step, self.step - 1, self.obs, episode=self.episode)
         return self.step
 
 

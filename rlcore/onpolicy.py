@@ -98,7 +98,7 @@ class ActorCriticPolicy:
     """The deterministic policy (Gaussian mean, or most likely action) with training's observation scaling."""
 
     def __init__(self, agent: ActorCritic, obs_mean=None, obs_var=None, obs_clip: float = 10.0, low=None, high=None):
-        self.agent = agent.eval()
+        self.agent = agent
         self.obs_mean = None if obs_mean is None else np.asarray(obs_mean)
         self.obs_var = None if obs_var is None else np.asarray(obs_var)
         self.obs_clip = obs_clip

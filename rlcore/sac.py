@@ -38,7 +38,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from rlcore.config import POSITIVE, check_budget, check_config
-from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
+from rlcore.harness import Evaluation, Run, evaluation, torch_rng
 from rlcore.nets import mlp, soft_update
 from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, DeterministicPolicy, Minibatch, Observations, OffPolicyConfig,
@@ -218,12 +218,13 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     entropy = [float("nan")]  # -log pi on the latest minibatch, for the temperature log
 
     run = Run("sac", env_id, config, steps, seed, out, progress, desc=f"SAC {env_id}", close=(env, eval_env),
-              evaluate=lambda: evaluation(saved_policy(actor, observations), eval_env, config.eval_episodes,
-                                          seed + 10_000),
-              episode_log=EPISODE_COLUMNS, logs={"alpha": ["step", "alpha", "entropy"]}, defer_interrupts=True)
-    run.track(actor=actor, critic=critic, critic_target=critic_t, temperature=temperature, actor_opt=actor_opt,
-              critic_opt=critic_opt, alpha_opt=alpha_opt, replay=buffer if config.replay_in_checkpoint else None,
-              rng=rng, torch_rng=torch_rng(), spaces=sp, obs=observations.saved())
+              logs={"alpha": ["step", "alpha", "entropy"]},
+              evaluation=Evaluation(lambda: evaluation(saved_policy(actor, observations), eval_env,
+                                                       config.eval_episodes, seed + 10_000)))
+    run.restores(actor=actor, critic=critic, critic_target=critic_t, temperature=temperature, actor_opt=actor_opt,
+                 critic_opt=critic_opt, alpha_opt=alpha_opt, replay=buffer if config.replay_in_checkpoint else None,
+                 rng=rng, torch_rng=torch_rng(), obs=observations.saved())
+    run.records(spaces=sp)
     loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
     loop.resume()
     alpha_log: list[tuple[int, float, float]] = []

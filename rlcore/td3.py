@@ -30,7 +30,7 @@ from torch import nn
 
 from rlcore.config import NON_NEGATIVE, check_budget, check_config
 from rlcore.ddpg import Result, make_optimizers, saved_policy  # noqa: F401 (Result: what train returns)
-from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
+from rlcore.harness import Evaluation, Run, evaluation, torch_rng
 from rlcore.nets import soft_update
 from rlcore.noise import GaussianNoise, exploration_state
 from rlcore.offpolicy import saved_actor
@@ -149,12 +149,12 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     observations = Observations(sp["obs_dim"], config.normalize_obs)
 
     run = Run("td3", env_id, config, steps, seed, out, progress, desc=f"TD3 {env_id}", close=(env, eval_env),
-              evaluate=lambda: evaluation(saved_policy(actor, observations), eval_env, config.eval_episodes,
-                                          seed + 10_000),
-              episode_log=EPISODE_COLUMNS, defer_interrupts=True)
-    run.track(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
-              critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
-              torch_rng=torch_rng(), noise=exploration_state(noise, None, actor), spaces=sp, obs=observations.saved())
+              evaluation=Evaluation(lambda: evaluation(saved_policy(actor, observations), eval_env,
+                                                       config.eval_episodes, seed + 10_000)))
+    run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
+                 critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
+                 torch_rng=torch_rng(), noise=exploration_state(noise, None, actor), obs=observations.saved())
+    run.records(spaces=sp)
     loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
     loop.resume()
 
