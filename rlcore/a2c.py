@@ -236,7 +236,8 @@ def train(
     run = Run("a2c", env_id, config, steps, seed, out, progress, desc=f"A2C {env_id}", target=iterations * per_iter,
               schedules=annealing(config), close=(envs, eval_env), logs={"updates": UPDATE_COLUMNS},
               evaluation=Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
-                                                       config.eval_episodes, seed + 10_000), at_end=True))
+                                                       config.eval_episodes, seed + 10_000), at_end=True,
+                                    keep_best=POLICY_KEYS))
     run.restores(agent=agent, optimizer=optimizer, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
                  ret=running_stats(ret_rms, "ret"))
     run.records(spaces=spaces, obs_clip=OBS_CLIP)

@@ -245,7 +245,8 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
     distributed = {"world_size": world, "backend": dist.get_backend()}
     opened = open_on_rank0(out, env_id, config, steps, seed, {"distributed": distributed, **({"command": command} if command else {})})
     evaluate = Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
-                                             config.eval_episodes, seed + 10_000), at_end=True)
+                                             config.eval_episodes, seed + 10_000), at_end=True,
+                          keep_best=POLICY_KEYS)
     run = Run(ALGO, env_id, config, steps, seed, progress=progress and rank == 0, target=target,
               desc=f"DPPO-{config.objective} {env_id} x{world}", episode_log=None, logs={"progress": PROGRESS_COLUMNS},
               evaluation=evaluate if eval_env is not None else None, close=(envs, eval_env),

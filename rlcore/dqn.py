@@ -272,7 +272,7 @@ def train(
               schedules="epsilon schedule" + (" and PER's beta" if config.prioritized else ""),
               meta={"variant": config.variant}, close=(env, eval_env), episode_log=EPISODE_COLUMNS + ["epsilon"],
               evaluation=Evaluation(lambda: evaluate_q(q, eval_env, config.eval_episodes, seed + 10_000, config.gamma),
-                                    EVAL_COLUMNS + ["q_start", "discounted_return_start"]))
+                                    EVAL_COLUMNS + ["q_start", "discounted_return_start"], keep_best=POLICY_KEYS))
     run.restores(q=q, q_target=q_target, optimizer=optimizer, replay=buffer if config.replay_in_checkpoint else None,
               rng=rng, torch_rng=torch_rng())
     step, episode = run.resume(step=0, episode=0)

@@ -269,7 +269,8 @@ def train(
               target=iterations * per_iter, schedules=annealing(config), close=(envs, eval_env),
               logs={"updates": UPDATE_COLUMNS},
               evaluation=Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
-                                                       config.eval_episodes, seed + 10_000), at_end=True))
+                                                       config.eval_episodes, seed + 10_000), at_end=True,
+                                    keep_best=POLICY_KEYS))
     run.restores(agent=agent, optimizer=optimizer, rng=rng, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
                  ret=running_stats(ret_rms, "ret"))
     run.records(spaces=spaces, obs_clip=OBS_CLIP)

@@ -220,7 +220,8 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     run = Run("sac", env_id, config, steps, seed, out, progress, desc=f"SAC {env_id}", close=(env, eval_env),
               logs={"alpha": ["step", "alpha", "entropy"]},
               evaluation=Evaluation(lambda: evaluation(saved_policy(actor, observations), eval_env,
-                                                       config.eval_episodes, seed + 10_000)))
+                                                       config.eval_episodes, seed + 10_000),
+                                    keep_best=POLICY_KEYS))
     run.restores(actor=actor, critic=critic, critic_target=critic_t, temperature=temperature, actor_opt=actor_opt,
                  critic_opt=critic_opt, alpha_opt=alpha_opt, replay=buffer if config.replay_in_checkpoint else None,
                  rng=rng, torch_rng=torch_rng(), obs=observations.saved())

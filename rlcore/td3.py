@@ -150,7 +150,8 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
 
     run = Run("td3", env_id, config, steps, seed, out, progress, desc=f"TD3 {env_id}", close=(env, eval_env),
               evaluation=Evaluation(lambda: evaluation(saved_policy(actor, observations), eval_env,
-                                                       config.eval_episodes, seed + 10_000)))
+                                                       config.eval_episodes, seed + 10_000),
+                                    keep_best=POLICY_KEYS))
     run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
                  critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
                  torch_rng=torch_rng(), noise=exploration_state(noise, None, actor), obs=observations.saved())
