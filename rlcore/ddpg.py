@@ -29,7 +29,7 @@ from rlcore.nets import soft_update
 from rlcore.noise import exploration_state, first_behaviour, make_exploration, noise_sigma
 from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,  # noqa: F401
-                              OffPolicyConfig, OffPolicyLoop, Probe, frozen, gradient_step, make_replay)
+                              OffPolicyConfig, OffPolicyLoop, UpdateHook, frozen, gradient_step, make_replay)
 from rlcore.offpolicy import check_spaces as _check_spaces
 from rlcore.offpolicy import make_envs as _make_envs
 
@@ -140,12 +140,9 @@ def saved_policy(actor: Actor, observations: Observations) -> DeterministicPolic
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
-          out: str | Path | None = None, progress: bool = False, probe: Probe | None = None) -> Result:
-    """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint).
-
-    ``probe``, for diagnostics only, is called before every learning step (:data:`rlcore.offpolicy.Probe`); it must
-    only read, so that the run stays the run it would be without it (the book's critic trace is one).
-    """
+          out: str | Path | None = None, progress: bool = False, on_update: UpdateHook | None = None) -> Result:
+    """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint). ``on_update``: a
+    read-only diagnostic called before every learning step (:data:`rlcore.offpolicy.UpdateHook`)."""
     check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
@@ -167,7 +164,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                  critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
                  torch_rng=torch_rng(), noise=exploration_state(noise, param_noise, actor), obs=observations.saved())
     run.records(spaces=sp)
-    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
+    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
     behaviour = first_behaviour(actor, param_noise)
 
@@ -195,16 +192,17 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     def learn(step: int, mb: Minibatch) -> None:
         # [ddpg-learn]
         o, a, r, o2, d = mb.tensors()
-        if probe is not None:
-            probe(step, mb, critic, lambda: critic_target(actor_t, critic_t, o2, r, d, config.gamma), config.gamma)
         update_critic(critic, critic_opt, actor_t, critic_t, o, a, r, o2, d, config.gamma)
         update_actor(actor, actor_opt, critic, o)
         soft_update(actor_t, actor, config.tau)
         soft_update(critic_t, critic, config.tau)
         # [/ddpg-learn]
 
-    step = loop.run_until(steps, act, learn, episode_columns=lambda: {"noise_sigma": noise_sigma(noise, param_noise)},
-                          episode_ended=episode_ended)
+    def targets(mb: Minibatch) -> torch.Tensor:  # what update_critic regresses on (for an on_update hook)
+        return critic_target(actor_t, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma)
+
+    step = loop.run_until(steps, act, learn, critic, targets, episode_ended=episode_ended,
+                          episode_columns=lambda: {"noise_sigma": noise_sigma(noise, param_noise)})
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns,
                   step, saved_policy(actor, observations))
 

@@ -73,7 +73,7 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 
 from rlcore import ppo
-from rlcore.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from rlcore.checkpoint import CheckpointError, save_checkpoint
 from rlcore.config import check_budget, config_dict
 from rlcore.distributed import (LAUNCH_HELP, broadcast_object, broadcast_weights, gather_rollouts,  # noqa: F401
                                 init_distributed, merge_contributions, snapshot, stats_contribution,
@@ -85,7 +85,7 @@ from rlcore.onpolicy import (OBS_CLIP, Rollout, annealing, check_spaces, collect
                              make_agent, make_envs, set_learning_rate, training_statistics)
 from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
 from rlcore.ppo import ppo_update, rollout_batch
-from rlcore.runs import RunDir, open_run
+from rlcore.runs import open_run
 
 ALGO = "ppo"
 """The checkpoint's ``algo``: DPPO's checkpoints are PPO's, plus a ``distributed`` entry."""
@@ -168,12 +168,8 @@ def open_on_rank0(out, env_id: str, config: Config, steps: int, seed: int, meta:
     folder = ckpt = error = None
     if dist.get_rank() == 0:
         try:
-            path = None if out is None else RunDir(out).checkpoint
-            if path is not None and path.exists() and (prior := load_checkpoint(path)).get("algo") == ALGO \
-                    and not prior.get("distributed"):
-                raise ValueError(f"{out} holds a single-process PPO run; resume it with `python -m rlcore train ppo`, "
-                                 "or choose another --out folder.")
-            folder, ckpt = open_run(out, ALGO, env_id, seed, steps, config, schedules=annealing(config), **meta)
+            folder, ckpt = open_run(out, ALGO, env_id, seed, steps, config, schedules=annealing(config),
+                                    data_parallel=True, **meta)
         except (ValueError, CheckpointError) as exc:
             error = str(exc)
     ckpt, error = broadcast_object((ckpt, error))

@@ -14,9 +14,9 @@
 An algorithm module keeps what is its own: its networks' losses and updates, how it explores, and what it learns
 from one minibatch. Its ``train`` reads like its algorithm box::
 
-    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
+    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
-    loop.run(steps, act=..., learn=...)
+    loop.run_until(steps, act, learn, critic, targets)
 """
 
 from __future__ import annotations
@@ -322,21 +322,36 @@ class Minibatch:
         return self.obs, self.actions, self.rewards, self.next_obs, self.terminated
 
 
-Probe = Callable[[int, Minibatch, nn.Module, Callable[[], torch.Tensor], float], None]
-"""A diagnostic called before every learning step: ``probe(step, minibatch, critic, target, gamma)``, where
-``target()`` computes that step's critic targets y. It must only read, so that the run it watches
-is the run without it (the book's critic trace is one)."""
+@dataclass
+class Update:
+    """What one learning step of DDPG, TD3 or SAC is about to do, as an :data:`UpdateHook` sees it: the environment
+    step, the minibatch, the critic the step updates, and ``targets()``, which computes the step's critic targets y
+    as the algorithm does."""
+
+    step: int
+    minibatch: Minibatch
+    critic: nn.Module
+    targets: Callable[[], torch.Tensor]
+
+
+UpdateHook = Callable[[Update], None]
+"""Called before every learning step of the off-policy loop with the :class:`Update` to come. It is for diagnostics
+and must only read, so that the run it watches is the run without it (the book's critic trace is one: it computes
+``targets()`` with torch's random generator forked, since TD3's and SAC's targets draw from it)."""
 
 
 class OffPolicyLoop:
     """The loop of DDPG, TD3 and SAC: act (uniformly at random before ``learning_starts``), store the transition,
     start a new episode at an episode's end, learn from one minibatch per step; the :class:`Run` evaluates,
-    checkpoints and shows progress. ``rng`` draws the random actions; the run must track it."""
+    checkpoints and shows progress. ``rng`` draws the random actions; the run must restore it. ``on_update``: a
+    read-only hook called before every learning step (:data:`UpdateHook`)."""
 
     def __init__(self, run: Run, env: gym.Env, buffer: ReplayBuffer, observations: Observations,
-                 config: OffPolicyConfig, seed: int, rng: np.random.Generator, box: ActionBox):
+                 config: OffPolicyConfig, seed: int, rng: np.random.Generator, box: ActionBox,
+                 on_update: UpdateHook | None = None):
         self.run, self.env, self.buffer, self.observations = run, env, buffer, observations
         self.config, self.seed, self.rng, self.box = config, seed, rng, box
+        self.on_update = on_update
         self.step = self.episode = 0
         self.obs: np.ndarray | None = None
 
@@ -348,11 +363,13 @@ class OffPolicyLoop:
         return self.step
 
     def run_until(self, steps: int, act: Callable[[np.ndarray], np.ndarray], learn: Callable[[int, Minibatch], None],
+                  critic: nn.Module, targets: Callable[[Minibatch], torch.Tensor],
                   episode_columns: Callable[[], dict[str, Any]] = dict,
                   episode_ended: Callable[[], None] | None = None) -> int:
         """Train until ``steps`` environment steps. ``act(obs)``: the behaviour action for a raw observation, in the
-        box. ``learn(step, minibatch)``: one learning step. ``episode_columns()``: extra columns of the episode log,
-        read as an episode ends; ``episode_ended()``: called after the next episode's reset."""
+        box. ``learn(step, minibatch)``: one learning step, which updates ``critic`` toward ``targets(minibatch)``
+        (what an ``on_update`` hook is shown). ``episode_columns()``: extra columns of the episode log, read as an
+        episode ends; ``episode_ended()``: called after the next episode's reset."""
         run, env, config = self.run, self.env, self.config
         with run:
             while self.step < steps:
@@ -372,7 +389,10 @@ class OffPolicyLoop:
                     if episode_ended is not None:
                         episode_ended()
                 if self.step >= config.learning_starts:
-                    learn(self.step, Minibatch.sample(self.buffer, config.batch_size, self.observations))
+                    mb = Minibatch.sample(self.buffer, config.batch_size, self.observations)
+                    if self.on_update is not None:
+                        self.on_update(Update(self.step, mb, critic, lambda: targets(mb)))
+                    learn(self.step, mb)
                 # [/offpolicy-loop]
                 run.step_done(self.step, self.step - 1, self.obs, episode=self.episode)
         return self.step

@@ -31,7 +31,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.checkpoint import load_checkpoint
 from rlcore.config import check_budget
 from rlcore.envs import make_env, pending_resets
 from rlcore.harness import Evaluation, Run, evaluation, running_stats, torch_rng
@@ -39,7 +38,6 @@ from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPoli
                              Rollout, annealing, collect_rollout, deterministic_policy, gae, make_agent, make_envs,
                              normalize, saved_policy, set_learning_rate, training_statistics, valid_batch)
 from rlcore.onpolicy import check_spaces as _check_spaces
-from rlcore.runs import RunDir
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -208,14 +206,6 @@ def check_spaces(envs: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str,
     return _check_spaces(envs, env_id, "PPO")
 
 
-def refuse_distributed(out: str | Path | None) -> None:
-    """A data-parallel run's folder is resumed by :mod:`rlcore.dppo`, not here."""
-    prior = RunDir(out).checkpoint if out is not None else None
-    if prior is not None and prior.exists() and load_checkpoint(prior).get("distributed"):
-        raise ValueError(f"{out} holds a data-parallel PPO run; resume it with `torchrun --nproc_per_node N -m "
-                         "rlcore.dppo ...` (see rlcore.dppo), or choose another --out folder.")
-
-
 def train(
     env_id: str,
     config: Config | None = None,
@@ -240,7 +230,6 @@ def train(
     eval_env = make_env(env_id, **config.env_kwargs)
     per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)
-    refuse_distributed(out)
     run = Run("ppo", env_id, config, steps, seed, out, progress, desc=f"PPO-{config.objective} {env_id}",
               target=iterations * per_iter, schedules=annealing(config), close=(envs, eval_env),
               logs={"updates": UPDATE_COLUMNS},

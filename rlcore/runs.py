@@ -66,7 +66,8 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
 
 
 def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, steps: int, config: Any,
-             schedules: str | None = None, **meta: Any) -> tuple[RunDir | None, dict[str, Any] | None]:
+             schedules: str | None = None, data_parallel: bool = False,
+             **meta: Any) -> tuple[RunDir | None, dict[str, Any] | None]:
     """Open a run's output folder: ``(run folder, checkpoint to resume from or None)``.
 
     No ``out``: ``(None, None)``. A folder with a checkpoint of the same algorithm, environment and seed
@@ -77,6 +78,9 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
     ``schedules`` names what the step budget shapes in this run (``"epsilon's decay"``), if anything. Such a
     run resumes only with the budget it started with: another ``steps`` would bend the schedule mid-run. A run
     whose budget shapes nothing (DDPG, tabular) may be resumed with a larger budget, which extends it.
+
+    ``data_parallel``: the run is trained by data-parallel workers (:mod:`rlcore.dppo`), whose checkpoints say so
+    (``distributed``); neither kind resumes the other's run.
     """
     if out is None:
         return None, None
@@ -90,6 +94,8 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
                 f"{run.root} holds a {ckpt.get('algo')} run on {ckpt.get('env_id')} (seed {ckpt.get('seed')}); "
                 "choose another --out folder or delete it."
             )
+        if bool(ckpt.get("distributed")) != data_parallel:
+            raise ValueError(other_kind(run.root, algo, data_parallel=not data_parallel))
         started = ckpt.get("total_steps")
         if schedules and started is not None and int(started) != steps:
             raise ValueError(
@@ -115,6 +121,15 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
     write_json(run.config, {"algo": algo, "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
     write_json(run.meta, run_metadata(algo=algo, env_id=env_id, seed=seed, steps=steps, **meta))
     return run, None
+
+
+def other_kind(root: Path, algo: str, data_parallel: bool) -> str:
+    """The one-line refusal of a folder that holds a run of the other kind, and how to resume that one."""
+    if data_parallel:
+        return (f"{root} holds a data-parallel {algo.upper()} run; resume it with `torchrun --nproc_per_node N -m "
+                "rlcore.dppo ...` (see rlcore.dppo), or choose another --out folder.")
+    return (f"{root} holds a single-process {algo.upper()} run; resume it with `python -m rlcore train {algo}`, "
+            "or choose another --out folder.")
 
 
 RESUME_FIELDS = ("step", "started", "command", "commit", "uncommitted", "checkout_at_start", "machine", "versions")

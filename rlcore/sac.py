@@ -42,7 +42,7 @@ from rlcore.harness import Evaluation, Run, evaluation, torch_rng
 from rlcore.nets import mlp, soft_update
 from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, DeterministicPolicy, Minibatch, Observations, OffPolicyConfig,
-                              OffPolicyLoop, TwinCritic, box_buffers, frozen, gradient_step, make_envs,
+                              OffPolicyLoop, TwinCritic, UpdateHook, box_buffers, frozen, gradient_step, make_envs,
                               make_replay, min_q)
 
 POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
@@ -198,8 +198,9 @@ def saved_policy(actor: SquashedGaussianActor, observations: Observations) -> De
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
-          out: str | Path | None = None, progress: bool = False) -> Result:
-    """Train SAC for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint)."""
+          out: str | Path | None = None, progress: bool = False, on_update: UpdateHook | None = None) -> Result:
+    """Train SAC for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint). ``on_update``: a
+    read-only diagnostic called before every learning step (:data:`rlcore.offpolicy.UpdateHook`)."""
     check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
@@ -226,7 +227,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                  critic_opt=critic_opt, alpha_opt=alpha_opt, replay=buffer if config.replay_in_checkpoint else None,
                  rng=rng, torch_rng=torch_rng(), obs=observations.saved())
     run.records(spaces=sp)
-    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
+    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
     alpha_log: list[tuple[int, float, float]] = []
 
@@ -235,10 +236,16 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         with torch.no_grad():
             return actor(observations.tensor(obs).unsqueeze(0))[0][0].numpy()
 
+    def temperature_now() -> float:
+        return float(log_alpha.detach().exp())
+
+    def targets(mb: Minibatch) -> torch.Tensor:
+        return soft_target(actor, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma, temperature_now())
+
     def learn(step: int, mb: Minibatch) -> None:
         # [sac-learn]
-        alpha = float(log_alpha.detach().exp())
-        y = soft_target(actor, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma, alpha)
+        alpha = temperature_now()
+        y = targets(mb)
         gradient_step(critic_opt, critic_loss(critic, mb.obs, mb.actions, y))
         with frozen(critic):
             loss, logp = actor_loss(actor, critic, mb.obs, alpha)
@@ -249,11 +256,11 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         # [/sac-learn]
         entropy[0] = -float(logp.mean())
         if config.eval_every and step % config.eval_every == 0:
-            row = (step, float(log_alpha.detach().exp()), entropy[0])
+            row = (step, temperature_now(), entropy[0])
             alpha_log.append(row)
             run.log("alpha", step=row[0], alpha=row[1], entropy=row[2])
 
-    step = loop.run_until(steps, act, learn)
+    step = loop.run_until(steps, act, learn, critic, targets)
     a = np.array(alpha_log, dtype=float).reshape(-1, 3)
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns, step,
                   saved_policy(actor, observations), a[:, 0].astype(int), a[:, 1], a[:, 2])

@@ -35,7 +35,7 @@ from rlcore.nets import soft_update
 from rlcore.noise import GaussianNoise, exploration_state
 from rlcore.offpolicy import saved_actor
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,
-                              OffPolicyConfig, OffPolicyLoop, Probe, TwinCritic, frozen, gradient_step, make_envs,
+                              OffPolicyConfig, OffPolicyLoop, TwinCritic, UpdateHook, frozen, gradient_step, make_envs,
                               make_replay, min_q)
 
 POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
@@ -133,9 +133,9 @@ def make_networks(sp: dict[str, Any], config: Config) -> tuple[Actor, nn.Module,
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
-          out: str | Path | None = None, progress: bool = False, probe: Probe | None = None) -> Result:
-    """Train TD3 for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint). ``probe``: a
-    read-only diagnostic called before every learning step (:data:`rlcore.offpolicy.Probe`)."""
+          out: str | Path | None = None, progress: bool = False, on_update: UpdateHook | None = None) -> Result:
+    """Train TD3 for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint). ``on_update``: a
+    read-only diagnostic called before every learning step (:data:`rlcore.offpolicy.UpdateHook`)."""
     check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
@@ -156,7 +156,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
                  critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
                  torch_rng=torch_rng(), noise=exploration_state(noise, None, actor), obs=observations.saved())
     run.records(spaces=sp)
-    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
+    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
 
     def act(obs: np.ndarray) -> np.ndarray:
@@ -165,21 +165,20 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
             action = actor(observations.tensor(obs).unsqueeze(0))[0].numpy()
         return box.clip(action + box.half * noise())
 
+    def targets(mb: Minibatch) -> torch.Tensor:
+        return clipped_double_q_target(actor_t, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma,
+                                       config.target_policy_noise, config.target_noise_clip)
+
     def learn(step: int, mb: Minibatch) -> None:
         # [td3-learn]
-        def target() -> torch.Tensor:
-            return clipped_double_q_target(actor_t, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma,
-                                           config.target_policy_noise, config.target_noise_clip)
-        if probe is not None:
-            probe(step, mb, critic, target, config.gamma)
-        update_critics(critic, critic_opt, target(), mb)
+        update_critics(critic, critic_opt, targets(mb), mb)
         if delayed(step, config.policy_delay):
             update_actor(actor, actor_opt, critic, mb.obs)
             soft_update(actor_t, actor, config.tau)
             soft_update(critic_t, critic, config.tau)
         # [/td3-learn]
 
-    step = loop.run_until(steps, act, learn, episode_ended=noise.reset)
+    step = loop.run_until(steps, act, learn, critic, targets, episode_ended=noise.reset)
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns,
                   step, saved_policy(actor, observations))
 
