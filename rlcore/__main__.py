@@ -2,6 +2,7 @@
 
     python -m rlcore train q-learning --env FrozenLake-v1 --steps 20000 --seed 0 --out runs/fl
     python -m rlcore evaluate runs/fl --episodes 10      # last line: one JSON object
+    python -m rlcore evaluate runs/cp --which best       # a run's best-evaluated policy (policy_best.pt)
     python -m rlcore render runs/fl --out fl.gif
 
 ``train`` shows a progress bar; Ctrl-C saves a checkpoint, and running the same command again resumes.
