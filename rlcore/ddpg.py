@@ -24,17 +24,15 @@ import torch
 from torch import nn
 
 from rlcore.config import check_budget, check_config
-from rlcore.harness import EPISODE_COLUMNS, Evaluation, Run, evaluation, torch_rng
+from rlcore.harness import EPISODE_COLUMNS, Run, torch_rng
 from rlcore.nets import soft_update
 from rlcore.noise import exploration_state, first_behaviour, make_exploration, noise_sigma
-from rlcore.offpolicy import saved_actor
+from rlcore.offpolicy import POLICY_KEYS, policy_evaluation, saved_actor  # noqa: F401 (POLICY_KEYS: load_policy's)
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,  # noqa: F401
                               OffPolicyConfig, OffPolicyLoop, UpdateHook, frozen, gradient_step, make_replay)
 from rlcore.offpolicy import check_spaces as _check_spaces
 from rlcore.offpolicy import make_envs as _make_envs
 
-POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
-"""Checkpoint keys :func:`load_policy` needs."""
 
 EXPLORATION = ("gaussian", "ou", "param", "none")
 
@@ -157,9 +155,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
 
     run = Run("ddpg", env_id, config, steps, seed, out, progress, desc=f"DDPG {env_id}", close=(env, eval_env),
               episode_log=EPISODE_COLUMNS + ["noise_sigma"],
-              evaluation=Evaluation(lambda: evaluation(saved_policy(actor, observations), eval_env,
-                                                       config.eval_episodes, seed + 10_000),
-                                    keep_best=POLICY_KEYS))
+              evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
     run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
                  critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
                  torch_rng=torch_rng(), noise=exploration_state(noise, param_noise, actor), obs=observations.saved())

@@ -35,7 +35,7 @@ from torch import nn
 from rlcore.buffers import ReplayBuffer
 from rlcore.config import config_from_dict
 from rlcore.envs import ObservationScaler, episode_seed, make_env, normalize_observation
-from rlcore.harness import Run, running_stats
+from rlcore.harness import Evaluation, Run, evaluation, running_stats
 from rlcore.nets import mlp
 
 
@@ -287,6 +287,18 @@ class DeterministicPolicy:
         x = obs if self.obs_mean is None else normalize_observation(obs, self.obs_mean, self.obs_var)
         with torch.no_grad():
             return self.actor(torch.as_tensor(x, dtype=torch.float32).unsqueeze(0))[0].numpy()
+
+
+POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
+"""Checkpoint keys the deterministic policy of DDPG, TD3 or SAC is rebuilt from (:func:`saved_actor`)."""
+
+
+def policy_evaluation(policy: Callable[[], DeterministicPolicy], eval_env: gym.Env, config: OffPolicyConfig,
+                      seed: int) -> Evaluation:
+    """The run's evaluation: ``policy()``, the deterministic policy now, on ``config.eval_episodes`` episodes of
+    ``eval_env`` (reset seeds from ``seed + 10_000``); the best-evaluated one is kept (``policy_best.pt``)."""
+    return Evaluation(lambda: evaluation(policy(), eval_env, config.eval_episodes, seed + 10_000),
+                      keep_best=POLICY_KEYS)
 
 
 def saved_actor(ckpt: dict[str, Any], config_cls: type, actor_cls: type) -> nn.Module:

@@ -38,15 +38,13 @@ import torch.nn.functional as F
 from torch import nn
 
 from rlcore.config import POSITIVE, check_budget, check_config
-from rlcore.harness import Evaluation, Run, evaluation, torch_rng
+from rlcore.harness import Run, torch_rng
 from rlcore.nets import mlp, soft_update
-from rlcore.offpolicy import saved_actor
+from rlcore.offpolicy import POLICY_KEYS, policy_evaluation, saved_actor  # noqa: F401 (POLICY_KEYS: load_policy's)
 from rlcore.offpolicy import (ActionBox, DeterministicPolicy, Minibatch, Observations, OffPolicyConfig,
                               OffPolicyLoop, TwinCritic, UpdateHook, box_buffers, frozen, gradient_step, make_envs,
                               make_replay, min_q)
 
-POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
-"""Checkpoint keys :func:`load_policy` needs."""
 
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0
 """The policy's log standard deviation is clamped to this range (as in Spinning Up and Stable-Baselines3)."""
@@ -220,9 +218,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
 
     run = Run("sac", env_id, config, steps, seed, out, progress, desc=f"SAC {env_id}", close=(env, eval_env),
               logs={"alpha": ["step", "alpha", "entropy"]},
-              evaluation=Evaluation(lambda: evaluation(saved_policy(actor, observations), eval_env,
-                                                       config.eval_episodes, seed + 10_000),
-                                    keep_best=POLICY_KEYS))
+              evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
     run.restores(actor=actor, critic=critic, critic_target=critic_t, temperature=temperature, actor_opt=actor_opt,
                  critic_opt=critic_opt, alpha_opt=alpha_opt, replay=buffer if config.replay_in_checkpoint else None,
                  rng=rng, torch_rng=torch_rng(), obs=observations.saved())

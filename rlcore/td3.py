@@ -30,16 +30,14 @@ from torch import nn
 
 from rlcore.config import NON_NEGATIVE, check_budget, check_config
 from rlcore.ddpg import Result, make_optimizers, saved_policy  # noqa: F401 (Result: what train returns)
-from rlcore.harness import Evaluation, Run, evaluation, torch_rng
+from rlcore.harness import Run, torch_rng
 from rlcore.nets import soft_update
 from rlcore.noise import GaussianNoise, exploration_state
-from rlcore.offpolicy import saved_actor
+from rlcore.offpolicy import POLICY_KEYS, policy_evaluation, saved_actor  # noqa: F401 (POLICY_KEYS: load_policy's)
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,
                               OffPolicyConfig, OffPolicyLoop, TwinCritic, UpdateHook, frozen, gradient_step, make_envs,
                               make_replay, min_q)
 
-POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
-"""Checkpoint keys :func:`load_policy` needs."""
 
 
 @dataclass
@@ -149,9 +147,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     observations = Observations(sp["obs_dim"], config.normalize_obs)
 
     run = Run("td3", env_id, config, steps, seed, out, progress, desc=f"TD3 {env_id}", close=(env, eval_env),
-              evaluation=Evaluation(lambda: evaluation(saved_policy(actor, observations), eval_env,
-                                                       config.eval_episodes, seed + 10_000),
-                                    keep_best=POLICY_KEYS))
+              evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
     run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
                  critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
                  torch_rng=torch_rng(), noise=exploration_state(noise, None, actor), obs=observations.saved())
