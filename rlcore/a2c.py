@@ -188,7 +188,7 @@ def train(
     eval_env = make_env(env_id, **config.env_kwargs)
     per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)
-    run = Run("a2c", env_id, config, steps, seed, out, progress, desc=f"A2C {env_id}", target=iterations * per_iter,
+    run = Run("a2c", env_id, config, steps, seed, out, progress, target=iterations * per_iter,
               schedules=annealing(config), close=(envs, eval_env), logs={"updates": UPDATE_COLUMNS},
               evaluation=Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
                                                        config.eval_episodes, seed + 10_000), at_end=True,

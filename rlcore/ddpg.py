@@ -153,7 +153,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     noise, param_noise = make_exploration(config, sp["act_dim"], seed)
     observations = Observations(sp["obs_dim"], config.normalize_obs)  # raw, or scaled by running statistics
 
-    run = Run("ddpg", env_id, config, steps, seed, out, progress, desc=f"DDPG {env_id}", close=(env, eval_env),
+    run = Run("ddpg", env_id, config, steps, seed, out, progress, close=(env, eval_env),
               episode_log=EPISODE_COLUMNS + ["noise_sigma"],
               evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
     run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,

@@ -18,8 +18,7 @@ A loop tells the run where it is with :meth:`Run.record_episode` (an episode end
 (the step counter moved on; here is the observation to act on next); the run decides what is due. A typical
 ``train``::
 
-    run = Run("ddpg", env_id, config, steps, seed, out, progress, desc="DDPG", evaluation=Evaluation(...),
-              close=(env, eval_env))
+    run = Run("ddpg", env_id, config, steps, seed, out, progress, evaluation=Evaluation(...), close=(env, eval_env))
     run.restores(actor=actor, critic=critic, actor_opt=actor_opt, rng=rng, torch_rng=torch_rng())
     run.records(spaces=spaces)
     step, episode = run.resume(step=0, episode=0)
@@ -45,7 +44,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from rlcore.checkpoint import Saved, load_checkpoint, load_running_stats, running_stats_state, save_checkpoint  # noqa: F401
+from rlcore.checkpoint import (Saved, load_checkpoint, load_running_stats, running_stats_state,  # noqa: F401
+                               save_checkpoint)
 from rlcore.envs import episode_state, restore_episode
 from rlcore.logger import CSVLogger
 from rlcore.config import config_dict
@@ -121,12 +121,13 @@ class Run:
     """One training run's folder, checkpoints, logs, progress bar and evaluations (see the module docstring).
 
     ``algo``, ``env_id``, ``config``, ``steps``, ``seed``, ``out`` and ``progress`` are ``train``'s; ``desc`` labels
-    the progress bar. ``target``: the step count at which the run is complete (default ``steps``; on-policy
-    algorithms round it up to whole iterations). ``schedules``: what the budget shapes, so that a resume must keep it
-    (see :func:`rlcore.runs.open_run`); ``meta``: extra fields for ``meta.json``. ``episode_log``: the columns of the
-    per-episode ``progress.csv`` (None: no per-episode log); ``logs``: other CSV logs, file stem to columns.
-    ``evaluation``: how the run evaluates (:class:`Evaluation`; none without it). ``close``: environments to close at
-    the end. ``workers``: a data-parallel worker's run (:class:`Workers`).
+    the progress bar (default: ``DDPG Hopper-v5``, say). ``target``: the step count at which the run is complete
+    (default ``steps``; on-policy algorithms round it up to whole iterations). ``schedules``: what the budget
+    shapes, so that a resume must keep it (see :func:`rlcore.runs.open_run`); ``meta``: extra fields for
+    ``meta.json``. ``episode_log``: the columns of the per-episode ``progress.csv`` (None: no per-episode log);
+    ``logs``: other CSV logs, file stem to columns. ``evaluation``: how the run evaluates (:class:`Evaluation`; none
+    without it). ``close``: environments to close at the end. ``workers``: a data-parallel worker's run
+    (:class:`Workers`).
 
     Inside ``with run``, a SIGINT or SIGTERM that would interrupt the process stops the loop at the end of its
     current step (:meth:`step_done`) instead of wherever it is, so that the checkpoint it writes is one between two
@@ -135,13 +136,15 @@ class Run:
     """
 
     def __init__(self, algo: str, env_id: str, config: Any, steps: int, seed: int, out: str | os.PathLike | None = None,
-                 progress: bool = False, *, desc: str, target: int | None = None, schedules: str | None = None,
+                 progress: bool = False, *, desc: str | None = None, target: int | None = None,
+                 schedules: str | None = None,
                  meta: dict[str, Any] | None = None, episode_log: list[str] | None = EPISODE_COLUMNS,
                  logs: dict[str, list[str]] | None = None, evaluation: Evaluation | None = None, close: tuple = (),
                  workers: Workers | None = None):
         self.algo, self.env_id, self.config, self.steps, self.seed = algo, env_id, config, steps, seed
         self.target = steps if target is None else target
-        self.desc, self.progress, self.evaluation = desc, progress, evaluation
+        self.desc = desc or f"{algo.upper()} {env_id}"
+        self.progress, self.evaluation = progress, evaluation
         self.eval_every = getattr(config, "eval_every", 0) if evaluation is not None else 0
         self.workers = workers
         self.checkpoint_on = "step" if workers is None else "iteration"

@@ -368,7 +368,7 @@ class OffPolicyLoop:
         self.obs: np.ndarray | None = None
 
     def resume(self) -> int:
-        """Restore what the run tracks from its checkpoint (if any), and the episode in progress; the step to go
+        """Restore what the run restores from its checkpoint (if any), and the episode in progress; the step to go
         on from."""
         self.step, self.episode = self.run.resume(step=0, episode=0)
         self.obs = self.run.resume_episode(self.env, reset_seed=episode_seed(self.seed, self.episode))

@@ -216,7 +216,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     observations = Observations(sp["obs_dim"], config.normalize_obs)
     entropy = [float("nan")]  # -log pi on the latest minibatch, for the temperature log
 
-    run = Run("sac", env_id, config, steps, seed, out, progress, desc=f"SAC {env_id}", close=(env, eval_env),
+    run = Run("sac", env_id, config, steps, seed, out, progress, close=(env, eval_env),
               logs={"alpha": ["step", "alpha", "entropy"]},
               evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
     run.restores(actor=actor, critic=critic, critic_target=critic_t, temperature=temperature, actor_opt=actor_opt,

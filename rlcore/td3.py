@@ -146,7 +146,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     noise = GaussianNoise(sp["act_dim"], config.exploration_noise, seed=seed)
     observations = Observations(sp["obs_dim"], config.normalize_obs)
 
-    run = Run("td3", env_id, config, steps, seed, out, progress, desc=f"TD3 {env_id}", close=(env, eval_env),
+    run = Run("td3", env_id, config, steps, seed, out, progress, close=(env, eval_env),
               evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
     run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
                  critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
