@@ -14,7 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, seed_list
+from rlcore.cli import EXIT_INTERRUPTED, Parser, count, run_command, seed_list
 
 
 def cmd_experiments(args: argparse.Namespace) -> int:
@@ -84,20 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rlcore.algos import UnknownAlgorithmError
-    from rlcore.checkpoint import CheckpointError
-    from rlcore.envs import UnknownEnvironmentError
-    from rlcore.render import HeadlessGLError
-    from rlcore.runs import loaded_commit, stop_on_signals
-
-    args = build_parser().parse_args(argv)
-    loaded_commit()  # the commit of the code this process loaded, which its runs record
-    stop_on_signals()  # a `kill` (SIGTERM) or Ctrl-C: checkpoint, then stop
-    try:
-        return args.func(args)
-    except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+    return run_command(build_parser().parse_args(argv))
 
 
 if __name__ == "__main__":

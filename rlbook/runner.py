@@ -10,6 +10,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -55,7 +56,7 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
     """Train (or resume) one seed in ``work`` and copy its small outputs to ``results`` (default: the book's
     ``runs/`` and ``results/``, :mod:`rlbook.paths`); returns a status line."""
     from rlcore.algos import get_algorithm
-    from rlcore.runs import torch_threads
+    from rlcore.machine import torch_threads
 
     torch_threads()  # one per process unless RLCORE_TORCH_THREADS says more (one long run on an idle machine)
     work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
@@ -105,7 +106,7 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None
     logs only grow, and their rows up to any step are what the resumed run writes again.
     """
     from rlcore.logger import read_csv
-    from rlcore.runs import run_metadata
+    from rlcore.provenance import run_metadata
 
     work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
     where = f"{exp}/{spec.name}/seed-{seed}"
@@ -162,10 +163,10 @@ def run_in_pool(fn: Callable[..., Any], calls: list[tuple], jobs: int):
     A call is handed to a worker only when one is free, so that when one fails, or the run is interrupted, no
     further call starts: the error is raised once the calls already running have returned. (Submitting
     everything at once would queue calls that a pool runs even after an interrupt.) An interrupt of this
-    process (Ctrl-C, or SIGTERM with :func:`rlcore.runs.stop_on_signals`) is passed on to the workers as SIGINT:
+    process (Ctrl-C, or SIGTERM with :func:`rlcore.signals.stop_on_signals`) is passed on to the workers as SIGINT:
     each running ``train`` saves a checkpoint and stops, instead of training on to the end of its seed.
     """
-    from rlcore.runs import stop_on_signals
+    from rlcore.signals import stop_on_signals
 
     # spawn, not fork: safe from a Jupyter kernel, whose threads a fork would copy half-way
     ctx = multiprocessing.get_context("spawn")
@@ -213,4 +214,8 @@ def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seed
     if not tasks:
         known = sorted({s for spec in chosen for s in spec.seeds})
         raise ValueError(f"{name} has no seed {seeds} in the runs chosen; their seeds: {known}.")
+    from rlcore.provenance import dirty_warning
+
+    if warning := dirty_warning():  # the runs record what was uncommitted; a clean tree needs no record
+        print(warning, file=sys.stderr)
     return train_all(name, tasks, jobs, results or paths.results_dir(), work or paths.work_dir())

@@ -23,7 +23,7 @@ travel with the policy, so evaluation sees observations exactly as training did.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,15 +32,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.checkpoint import load_checkpoint
-from rlcore.config import check_budget, check_config
+from rlcore.config import check_budget
 from rlcore.envs import make_env, pending_resets
-from rlcore.harness import Run, evaluation, running_stats, torch_rng
-from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, Rollout, annealing,  # noqa: F401
-                             collect_rollout, deterministic_policy, gae, make_agent, make_envs, normalize,
-                             saved_policy, set_learning_rate, training_statistics, valid_batch)
+from rlcore.harness import Evaluation, Run, evaluation, running_stats, torch_rng
+from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, OnPolicyConfig,  # noqa: F401
+                             Rollout, annealing, collect_rollout, deterministic_policy, gae, make_agent, make_envs,
+                             normalize, saved_policy, set_learning_rate, training_statistics, valid_batch)
 from rlcore.onpolicy import check_spaces as _check_spaces
-from rlcore.runs import RunDir
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -49,28 +47,34 @@ OBJECTIVES = ("clip", "kl")
 
 
 @dataclass
-class Config:
-    """Hyperparameters of PPO (defaults: the PPO paper's MuJoCo settings; report names in brackets)."""
+class Config(OnPolicyConfig):
+    """Hyperparameters of PPO (defaults: the PPO paper's MuJoCo settings; report names in brackets). The fields PPO
+    shares with A2C and DPPO are :class:`rlcore.onpolicy.OnPolicyConfig`'s; those whose defaults differ from A2C's
+    are set again here."""
 
-    objective: str = "clip"
-    """``"clip"`` (clipped surrogate) or ``"kl"`` (adaptive KL penalty) [method-index clip(1)/KL(0)]."""
     num_envs: int = 1
     """Environments stepped in parallel (a Gymnasium vector environment)."""
     n_steps: int = 2048
     """Steps per environment per iteration; a rollout holds n_steps * num_envs transitions [memory-batch]."""
-    batch_size: int = 64
-    """Minibatch size for the gradient steps."""
-    n_epochs: int = 10
-    """Passes over each rollout [action-update-steps, critic-update-steps]."""
+    gae_lambda: float = 0.95
+    """GAE's lambda: 0 is the one-step TD error, 1 the Monte-Carlo return minus V (the report's algorithm box uses
+    Monte-Carlo advantages, 1; its ``lam`` is the KL coefficient below)."""
     learning_rate: float = 3e-4
     """Adam step size (one optimizer for actor and critic)."""
     anneal_lr: bool = True
     """Decay the step size linearly to 0 over the run."""
-    gamma: float = 0.99
-    """Discount factor."""
-    gae_lambda: float = 0.95
-    """GAE's lambda: 0 is the one-step TD error, 1 the Monte-Carlo return minus V (the report's algorithm box uses
-    Monte-Carlo advantages, 1; its ``lam`` is the KL coefficient below)."""
+    normalize_advantage: bool = True
+    """Standardize advantages per minibatch (the report's 'advantage value normalization')."""
+    normalize_obs: bool = True
+    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
+    normalize_reward: bool = True
+    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
+    objective: str = "clip"
+    """``"clip"`` (clipped surrogate) or ``"kl"`` (adaptive KL penalty) [method-index clip(1)/KL(0)]."""
+    batch_size: int = 64
+    """Minibatch size for the gradient steps."""
+    n_epochs: int = 10
+    """Passes over each rollout [action-update-steps, critic-update-steps]."""
     clip_range: float = 0.2
     """The clipped objective's epsilon [epsilon]."""
     kl_target: float = 0.01
@@ -83,45 +87,15 @@ class Config:
     """beta grows when KL > kl_beta_high * kl_target [beta-high]."""
     kl_alpha: float = 2.0
     """Factor by which beta grows or shrinks [alpha]."""
-    normalize_advantage: bool = True
-    """Standardize advantages per minibatch (the report's 'advantage value normalization')."""
-    normalize_obs: bool = True
-    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
-    normalize_reward: bool = True
-    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
-    ent_coef: float = 0.0
-    """Entropy bonus weight."""
-    vf_coef: float = 0.5
-    """Value-loss weight."""
-    max_grad_norm: float = 0.5
-    """Clip the gradient's global norm to this."""
-    hidden: tuple[int, ...] = (64, 64)
-    """Hidden layers of the actor and of the critic (separate networks) [hidden-size]."""
-    activation: str = "tanh"
-    """Hidden-layer nonlinearity: ``"tanh"`` (the PPO paper) or ``"relu"`` (RL-Zoo's tuned MuJoCo settings)."""
-    ortho_init: bool = True
-    """Orthogonal initialization with a small last policy layer; False keeps PyTorch's default init."""
-    log_std_init: float = 0.0
-    """Initial log standard deviation of the Gaussian policy (continuous actions)."""
     explore_noise: float = 0.0
     """Extra Gaussian noise added to the policy's sampled actions, its standard deviation in action units (0: none)
     [use-explore]. The noisy action is what is stored and learned from, as in the report; the policy then no
     longer samples its own data exactly, so PPO's ratio is only approximately right."""
     explore_decay: float = 1.0
     """The extra noise's standard deviation is ``explore_noise * explore_decay ** step`` [explore-decay]."""
-    eval_every: int = 10_000
-    """Evaluate the deterministic policy after the first iteration past every this many steps (0: never)."""
-    eval_episodes: int = 5
-    """Episodes per evaluation."""
-    checkpoint_every: int = 50_000
-    """Write checkpoint.pt after the first iteration past every this many steps (and at the end, and on Ctrl-C)."""
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    """Keyword arguments for ``gymnasium.make``."""
 
     def __post_init__(self) -> None:
-        check_config(self)
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
+        super().__post_init__()
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
         if self.batch_size > self.n_steps * self.num_envs:
@@ -233,14 +207,6 @@ def check_spaces(envs: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str,
     return _check_spaces(envs, env_id, "PPO")
 
 
-def refuse_distributed(out: str | Path | None) -> None:
-    """A data-parallel run's folder is resumed by :mod:`rlcore.dppo`, not here."""
-    prior = RunDir(out).checkpoint if out is not None else None
-    if prior is not None and prior.exists() and load_checkpoint(prior).get("distributed"):
-        raise ValueError(f"{out} holds a data-parallel PPO run; resume it with `torchrun --nproc_per_node N -m "
-                         "rlcore.dppo ...` (see rlcore.dppo), or choose another --out folder.")
-
-
 def train(
     env_id: str,
     config: Config | None = None,
@@ -265,21 +231,22 @@ def train(
     eval_env = make_env(env_id, **config.env_kwargs)
     per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)
-    refuse_distributed(out)
     run = Run("ppo", env_id, config, steps, seed, out, progress, desc=f"PPO-{config.objective} {env_id}",
-              target=iterations * per_iter, schedules=annealing(config), eval_at_end=True, close=(envs, eval_env),
-              evaluate=lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
-                                          config.eval_episodes, seed + 10_000),
-              logs={"updates": UPDATE_COLUMNS}, defer_interrupts=True)
-    run.track(agent=agent, optimizer=optimizer, rng=rng, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
-              ret=running_stats(ret_rms, "ret"), spaces=spaces, obs_clip=OBS_CLIP)
+              target=iterations * per_iter, schedules=annealing(config), close=(envs, eval_env),
+              logs={"updates": UPDATE_COLUMNS},
+              evaluation=Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
+                                                       config.eval_episodes, seed + 10_000), at_end=True,
+                                    keep_best=POLICY_KEYS))
+    run.restores(agent=agent, optimizer=optimizer, rng=rng, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
+                 ret=running_stats(ret_rms, "ret"))
+    run.records(spaces=spaces, obs_clip=OBS_CLIP)
     step, iteration, kl_coef = run.resume(step=0, iteration=0, kl_coef=config.kl_coef)
     buf = Rollout(spaces, config.n_steps, config.num_envs)
 
     def on_episode(t: int, episode_return: float, length: int) -> None:  # an episode ended at rollout step t
         run.record_episode(step + (t + 1) * config.num_envs, episode_return, length)
 
-    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration, observation=lambda: obs)
+    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration)
     buf.ended = pending_resets(envs)  # the copies whose episode ended on the step before the checkpoint
     with run:
         while iteration < iterations:
@@ -298,7 +265,7 @@ def train(
             m = np.mean(stats, axis=0)
             run.log("updates", iteration=iteration, step=step, policy_loss=m[0], value_loss=m[1], entropy=m[2],
                     approx_kl=mean_kl, clip_fraction=m[4], kl_coef=kl_coef, learning_rate=lr)
-            run.step_done(step, step - per_iter, iteration=iteration, kl_coef=kl_coef)
+            run.step_done(step, step - per_iter, obs, iteration=iteration, kl_coef=kl_coef)
     return Result(agent, deterministic_policy(agent, spaces, obs_rms), run.episode_returns, run.episode_end_steps,
                   run.eval_steps, run.eval_returns, step)
 

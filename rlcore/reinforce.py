@@ -27,7 +27,7 @@ from torch import nn
 from rlcore.a2c import Result, entropy_bonus, make_optimizer, policy_gradient_loss  # Result: A2C's fields
 from rlcore.config import AT_LEAST_ONE, check_budget, check_config
 from rlcore.envs import make_env
-from rlcore.harness import Run, evaluation, torch_rng
+from rlcore.harness import Evaluation, Run, evaluation, torch_rng
 from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, check_spaces,
                              deterministic_policy, make_agent, saved_policy)
 
@@ -175,13 +175,14 @@ def train(
     agent = make_agent(spaces, config)
     optimizer = make_optimizer(agent, config)   # A2C's; the critic gets no gradient, so no step
     run = Run("reinforce", env_id, config, steps, seed, out, progress, desc=f"REINFORCE {env_id}",
-              eval_at_end=True, close=(env, eval_env),
-              evaluate=lambda: evaluation(deterministic_policy(agent, spaces), eval_env, config.eval_episodes,
-                                          seed + 10_000),
-              logs={"updates": UPDATE_COLUMNS}, defer_interrupts=True)
-    run.track(agent=agent, optimizer=optimizer, torch_rng=torch_rng(), spaces=spaces, obs_clip=OBS_CLIP)
+              close=(env, eval_env), logs={"updates": UPDATE_COLUMNS},
+              evaluation=Evaluation(lambda: evaluation(deterministic_policy(agent, spaces), eval_env,
+                                                       config.eval_episodes, seed + 10_000), at_end=True,
+                                    keep_best=POLICY_KEYS))
+    run.restores(agent=agent, optimizer=optimizer, torch_rng=torch_rng())
+    run.records(spaces=spaces, obs_clip=OBS_CLIP)
     step, iteration = run.resume(step=0, iteration=0)
-    obs = run.resume_episode(env, reset_seed=seed, observation=lambda: obs)
+    obs = run.resume_episode(env, reset_seed=seed)
     with run:
         while step < steps:
             before = step
@@ -198,7 +199,7 @@ def train(
             iteration += 1
             # [/reinforce-loop]
             run.log("updates", iteration=iteration, step=step, episodes=len(episodes), **stats)
-            run.step_done(step, before, iteration=iteration)
+            run.step_done(step, before, obs, iteration=iteration)
     return Result(agent, deterministic_policy(agent, spaces), run.episode_returns, run.episode_end_steps,
                   run.eval_steps, run.eval_returns, step)
 

@@ -118,7 +118,7 @@ def _train_until_interrupted(folder, i):
 
 
 def pool_main(folder):  # run in a subprocess by the test below, as `experiments run --jobs 2` would
-    from rlcore.runs import stop_on_signals
+    from rlcore.signals import stop_on_signals
 
     stop_on_signals()
     try:
