@@ -129,12 +129,17 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None
 
 
 def snapshot_experiment(name: str, only: list[str] | None = None, seeds: list[int] | None = None,
-                        results: Path | None = None, work: Path | None = None, policy: bool = False) -> list[str]:
-    """:func:`snapshot_one` for every chosen seed of an experiment."""
-    chosen = chosen_runs(name, only)
+                        results: Path | None = None, work: Path | None = None, policy: bool = False,
+                        ray: str | None = None) -> list[str]:
+    """:func:`snapshot_one` for every chosen seed of an experiment; with ``ray`` (a cluster's address), on the node
+    where each seed trains (:func:`rlbook.cluster.snapshot_on_ray`)."""
+    picks = [(spec, s) for spec in chosen_runs(name, only) for s in spec.seeds if seeds is None or s in seeds]
     results, work = results or paths.results_dir(), work or paths.work_dir()
-    return [snapshot_one(name, spec, s, results, work, policy) for spec in chosen
-            for s in spec.seeds if seeds is None or s in seeds]
+    if ray:
+        from rlbook.cluster import snapshot_on_ray
+
+        return snapshot_on_ray(name, picks, results, work.resolve(), ray, policy)
+    return [snapshot_one(name, spec, s, results, work, policy) for spec, s in picks]
 
 
 def train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: Path, work: Path,
@@ -204,13 +209,23 @@ def chosen_runs(name: str, only: list[str] | None = None) -> list[RunSpec]:
     return [spec for spec in exp.runs if not only or spec.name in only]
 
 
-def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
-                   results: Path | None = None, work: Path | None = None) -> list[str]:
-    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time, in ``work`` with the small
-    outputs copied to ``results`` (default: the book's ``runs/`` and ``results/``, :mod:`rlbook.paths`)."""
+def run_experiment(name: str, jobs: int | None = None, only: list[str] | None = None, seeds: list[int] | None = None,
+                   results: Path | None = None, work: Path | None = None, ray: str | None = None,
+                   progress: bool = True) -> list[str]:
+    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time (default 1), in ``work`` with
+    the small outputs copied to ``results`` (default: the book's ``runs/`` and ``results/``, :mod:`rlbook.paths`).
+
+    With ``ray``, a Ray cluster's address (``auto``, ``HOST:PORT``, or ``local`` for one of this machine with
+    ``jobs`` CPUs, default all), each seed is a task on the cluster (:func:`rlbook.cluster.run_on_ray`), its
+    results written here all the same."""
     chosen = chosen_runs(name, only)
     tasks = [(spec, s) for spec in chosen for s in spec.seeds if seeds is None or s in seeds]
     if not tasks:
         known = sorted({s for spec in chosen for s in spec.seeds})
         raise ValueError(f"{name} has no seed {seeds} in the runs chosen; their seeds: {known}.")
-    return train_all(name, tasks, jobs, results or paths.results_dir(), work or paths.work_dir())
+    results, work = results or paths.results_dir(), work or paths.work_dir()
+    if ray:
+        from rlbook.cluster import run_on_ray
+
+        return run_on_ray(name, tasks, results, work.resolve(), ray, cpus=jobs, progress=progress)
+    return train_all(name, tasks, jobs or 1, results, work, progress)
