@@ -66,13 +66,11 @@ def result_files(folder: Path) -> dict[str, object]:
 
 def one_round(tmp: Path, r: int, counts: list[int]) -> dict[str, float]:
     """One round (see the module docstring): each run's seconds, by way and seed count, and ``ray.init``'s."""
-    import logging
-
-    import ray
+    from rlbook.cluster import connect
 
     times = {f"local_{n}": timed_run(tmp / f"local-{r}-{n}", None, n) for n in counts}
     start = time.perf_counter()
-    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level=logging.WARNING)
+    ray = connect("local", cpus=2)  # as `--ray local --jobs 2` starts it
     times["ray_init"] = time.perf_counter() - start
     try:
         times[f"ray_first_{counts[0]}"] = timed_run(tmp / f"first-{r}", "auto", counts[0])

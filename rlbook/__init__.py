@@ -26,6 +26,8 @@ The package, one idea a module. It imports :mod:`rlcore`; :mod:`rlcore` never im
 - :mod:`rlbook.paths`: where the book is (``RLBOOK_ROOT``, or the checkout around the working directory);
 - :mod:`rlbook.registry`: the named experiments (``RunSpec``, ``Experiment``, ``EXPERIMENTS``);
 - :mod:`rlbook.runner`: training them, one process per core, resumable; snapshots of seeds still training;
+- :mod:`rlbook.cluster`: the same on a Ray cluster (``experiments run --ray``; Ray is optional);
+  :mod:`rlbook.cluster_time`: how the experiments' wall time would scale with machines;
 - :mod:`rlbook.results`: reading ``results/`` (or a short live stand-in) and its provenance;
 - :mod:`rlbook.analysis`: the statistics and tables the chapters quote;
 - :mod:`rlbook.pages`: an experiment's runs as a page loads, labels and describes them; ``check_printed``;

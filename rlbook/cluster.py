@@ -64,7 +64,11 @@ def import_ray():
 def connect(address: str, cpus: int | None = None):
     """Join the Ray cluster at ``address`` (``auto``: the one ``ray start`` runs on this machine; ``HOST:PORT``), or
     with ``local`` start one on this machine with ``cpus`` CPUs (default: all); a connected driver stays. Returns
-    the ``ray`` module."""
+    the ``ray`` module.
+
+    Ray starts its worker processes at nice 15; a cluster of this machine alone starts them at this process's
+    niceness instead (unless ``RAY_worker_niceness`` says otherwise), as the local pool's workers run, so that on a
+    shared machine the seeds are not pushed behind everything else."""
     import logging
 
     ray = import_ray()
@@ -72,6 +76,7 @@ def connect(address: str, cpus: int | None = None):
         return ray
     try:
         if address == "local":
+            os.environ.setdefault("RAY_worker_niceness", str(os.nice(0)))
             ray.init(address="local", num_cpus=cpus, include_dashboard=False, namespace=NAMESPACE,
                      logging_level=logging.WARNING)
         else:
