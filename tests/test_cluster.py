@@ -17,7 +17,7 @@ import torch
 
 import rlbook as ex
 from portable import skip_or_fail
-from rlbook.cluster import BOARD_PREFIX, INSTALL, NAMESPACE, RAY_VERSION
+from rlbook.cluster import BOARD_PREFIX, INSTALL, NAMESPACE, RAY_VERSION, Board, last_value
 
 TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
     ex.RunSpec("ql", "q-learning", "FrozenLake-v1", 3_000, (0, 1), {"env_kwargs": {"is_slippery": False}}),
@@ -196,6 +196,31 @@ def test_without_ray_one_line_says_what_to_install_and_the_local_pool_works(tmp_
     done = subprocess.run(driver(argv, blocked="ray"), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "results" / TINY.name / "ql" / "seed-0" / "policy.pt").exists()
+
+
+def test_the_board_says_how_a_retried_seed_goes_on():
+    # no Ray needed: the board is a plain class, which Ray runs as an actor
+    board = Board()
+    assert board.attempt("e/r/seed-0", "a" * 20, 11, None) is None  # a first attempt says nothing
+    board.report("e/r/seed-0", 1_500.0, -3.5)
+    note = board.attempt("e/r/seed-0", "b" * 20, 12, None)
+    assert note == ("e/r/seed-0: its worker (pid 11, node aaaaaaaa) died at step 1,500; retried on node bbbbbbbb, "
+                    "restarting from step 0: no checkpoint in its run folder there (the last one is on node "
+                    "aaaaaaaa; give --runs-dir on storage every node sees to resume instead)")
+    board.report("e/r/seed-0", 2_000.0, None)
+    assert board.attempt("e/r/seed-0", "b" * 20, 13, 1_750.0).endswith(
+        "died at step 2,000; retried on node bbbbbbbb, resuming from its checkpoint (logs to step 1,750)")
+    assert len(board.state()["e/r/seed-0"]["notes"]) == 2 and board.state()["e/r/seed-0"]["step"] == 2_000.0
+
+
+def test_last_value_reads_the_last_row_of_a_log(tmp_path):
+    log = tmp_path / "progress.csv"
+    assert last_value(log, "step") is None
+    log.write_text("episode,step,episode_return\n")
+    assert last_value(log, "step") is None
+    log.write_text("episode,step,episode_return\n" + "".join(f"{i},{20 * i},{i}.5\n" for i in range(1, 2_000)))
+    assert last_value(log, "step") == 39_980 and last_value(log, "episode_return") == 1_999.5
+    assert last_value(log, "no-such-column") is None
 
 
 def test_the_pinned_ray_is_the_one_requirements_install():
