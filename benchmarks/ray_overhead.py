@@ -58,7 +58,7 @@ def result_files(folder: Path) -> dict[str, object]:
     out: dict[str, object] = {}
     for path in sorted((folder / "results").rglob("*")):
         if path.is_file():
-            key = str(path.relative_to(folder))
+            key = str(path.relative_to(folder / "results"))
             out[key] = ({**json.loads(path.read_text()), "started": None} if path.name == "meta.json"
                         else path.read_bytes())
     return out
@@ -78,8 +78,12 @@ def one_round(tmp: Path, r: int, counts: list[int]) -> dict[str, float]:
     finally:
         ray.shutdown()
     for ray_run, n in ((f"first-{r}", counts[0]), *((f"ray-{r}-{n}", n) for n in counts)):
-        if result_files(tmp / ray_run) != result_files(tmp / f"local-{r}-{n}"):
-            raise SystemExit(f"round {r + 1}: the Ray path ({ray_run}) wrote other results than the local pool")
+        ours, theirs = result_files(tmp / ray_run), result_files(tmp / f"local-{r}-{n}")
+        differ = [f"{name} {sorted(k for k in ours[name] if ours[name][k] != theirs[name].get(k))}"
+                  if name.endswith("meta.json") else name for name in ours if ours[name] != theirs.get(name)]
+        if differ or ours.keys() != theirs.keys():
+            raise SystemExit(f"round {r + 1}: the Ray path ({ray_run}) wrote other results than the local pool: "
+                             + "; ".join(differ or ["other files"]))
     print(", ".join(f"{k} {v:.1f} s" for k, v in times.items()) + f"; load {os.getloadavg()[0]:.2f}", flush=True)
     return times
 
