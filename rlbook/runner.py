@@ -62,8 +62,7 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
     if (result_dir / "policy.pt").exists():
         return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
     if spec.algo == "dppo":  # one process per worker, started by torchrun; each worker with one torch thread
-        subprocess.run(distributed_command(spec, seed, work_dir), check=True,
-                       env={**os.environ, "OMP_NUM_THREADS": "1"})
+        run_torchrun(distributed_command(spec, seed, work_dir), {**os.environ, "OMP_NUM_THREADS": "1"})
     else:
         module = get_algorithm(spec.algo)
         config = module.make_config(spec.algo, **spec.overrides)
@@ -73,6 +72,21 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
     for name in (SNAPSHOT, SNAPSHOT_POLICY):  # the finished seed replaces its in-progress snapshot
         (result_dir / name).unlink(missing_ok=True)
     return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
+
+
+def run_torchrun(cmd: list[str], env: dict[str, str]) -> None:
+    """Run a torchrun job to its end; an interrupt of this process (Ctrl-C, a pool's or Ray's cancel) is passed
+    to torchrun as SIGINT, which stops its workers (they checkpoint every update), and waited for, so that no
+    worker is left behind."""
+    job = subprocess.Popen(cmd, env=env)
+    try:
+        code = job.wait()
+    except KeyboardInterrupt:
+        job.send_signal(signal.SIGINT)
+        job.wait()
+        raise
+    if code:
+        raise subprocess.CalledProcessError(code, cmd)
 
 
 LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv", "alpha.csv")
