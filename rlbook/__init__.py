@@ -10,7 +10,8 @@ Each run trains in a work folder (``runs/<experiment>/<run>/seed-<s>/``, not com
 full checkpoints with replay memories) and, when it finishes, its small outputs are copied to
 ``results/<experiment>/<run>/seed-<s>/``:
 
-    config.json  meta.json     what ran: algorithm, environment, Config, seed, steps; command, versions, commit
+    config.json  meta.json     what ran: algorithm, environment, Config, seed, steps; command, versions, commit;
+                               the wall and CPU seconds of the session that finished it (timing)
     progress.csv eval.csv      per-episode training returns; periodic evaluations of the deterministic policy
     policy.pt                  the final policy's weights only (loads with weights_only=True)
 

@@ -310,7 +310,7 @@ def collect(ray, refs: dict, board, desc: str, progress: bool) -> list[str]:
             bars.show(state)
             for ref in done:
                 key, _, result_dir = refs[ref]
-                line, files, there = ray.get(ref)
+                line, files, there = outcome(ray, ref)
                 unpack(files, result_dir)
                 notes = state.get(key, {}).get("notes", [])
                 lines.append(line.replace(there, str(result_dir)) + "".join(f" ({n.split(': ', 1)[1]})" for n in notes))
@@ -321,6 +321,17 @@ def collect(ray, refs: dict, board, desc: str, progress: bool) -> list[str]:
     finally:
         bars.close()
     return lines
+
+
+def outcome(ray, ref):
+    """What the task ``ref`` returned; an error of its own comes out as itself, as from the local pool (a bad setting
+    is one line, not Ray's wrapper around a remote traceback)."""
+    try:
+        return ray.get(ref)
+    except ray.exceptions.RayTaskError as exc:
+        if isinstance(getattr(exc, "cause", None), Exception):
+            raise exc.cause from None
+        raise
 
 
 def stop(ray, pending: list) -> None:
@@ -363,7 +374,7 @@ def snapshot_on_ray(name: str, picks: list[tuple[RunSpec, int]], results: Path, 
             lines.append(snapshot_one(name, spec, s, results, work, policy))
             continue
         there = NodeAffinitySchedulingStrategy(node, soft=False)
-        line, files, tmp = ray.get(remote.options(num_cpus=0, scheduling_strategy=there).remote(
+        line, files, tmp = outcome(ray, remote.options(num_cpus=0, scheduling_strategy=there).remote(
             name, spec, s, pack(result_dir), str(work), command_line(), policy))
         unpack(files, result_dir)
         lines.append(line.replace(tmp, str(result_dir)) + f" (from node {node[:8]})")

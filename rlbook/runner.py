@@ -7,9 +7,11 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
+import resource
 import shutil
 import signal
 import subprocess
+import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -61,6 +63,7 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
     work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
     if (result_dir / "policy.pt").exists():
         return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
+    started = (time.perf_counter(), cpu_seconds())
     if spec.algo == "dppo":  # one process per worker, started by torchrun; each worker with one torch thread
         run_torchrun(distributed_command(spec, seed, work_dir), {**os.environ, "OMP_NUM_THREADS": "1"})
     else:
@@ -68,10 +71,28 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
         config = module.make_config(spec.algo, **spec.overrides)
         module.train(spec.env_id, config, steps=spec.steps, seed=seed, out=work_dir, progress=False)
     copy_logs(work_dir, result_dir)
+    record_timing(result_dir / "meta.json", time.perf_counter() - started[0], cpu_seconds() - started[1])
     export_policy(work_dir / "checkpoint.pt", result_dir / "policy.pt")
     for name in (SNAPSHOT, SNAPSHOT_POLICY):  # the finished seed replaces its in-progress snapshot
         (result_dir / name).unlink(missing_ok=True)
     return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process and of its children that have ended (torchrun and its workers)."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
+def record_timing(meta: Path, wall: float, cpu: float) -> None:
+    """Add to a seed's results ``meta.json`` what its last session took: ``timing`` = wall and CPU seconds (the
+    process's and its workers'), and the step that session started from (0, or its last resume's)."""
+    from rlcore.runs import write_json
+
+    record = json.loads(meta.read_text())
+    record["timing"] = {"wall_seconds": round(wall, 3), "cpu_seconds": round(cpu, 3),
+                        "from_step": int(record["resumes"][-1]["step"]) if record.get("resumes") else 0}
+    write_json(meta, record)
 
 
 def run_torchrun(cmd: list[str], env: dict[str, str]) -> None:

@@ -83,8 +83,9 @@ def assert_same_training(ours: Path, theirs: Path, run: str, meta: bool = True) 
     for name in a:
         if name == "meta.json":
             x, y = json.loads(a[name]), json.loads(b[name])
-            if meta:
-                assert {**x, "started": None} == {**y, "started": None}
+            assert x["timing"]["wall_seconds"] > 0 and x["timing"]["cpu_seconds"] > 0
+            if meta:  # the same provenance; but when it started and how long it took
+                assert {**x, "started": None, "timing": None} == {**y, "started": None, "timing": None}
         elif name != "policy.pt":
             assert a[name] == b[name], (run, name)
     x, y = (torch.load(d / TINY.name / run / "seed-0" / "policy.pt", weights_only=True) for d in (ours, theirs))
@@ -115,6 +116,18 @@ def test_results_are_the_local_runners_bit_for_bit(cluster, reference, tmp_path)
     again = ex.run_experiment(TINY.name, only=["dqn"], results=results, work=tmp_path / "runs", ray="auto",
                               progress=False)
     assert again == [f"{TINY.name}/dqn/seed-0: already in {results / TINY.name / 'dqn' / 'seed-0'}"]
+
+
+def test_a_seeds_own_error_comes_back_as_itself(cluster, tmp_path, monkeypatch):
+    # as from the local pool: a bad setting is the library's one-line error, not Ray's wrapper of a remote traceback
+    bad = ex.Experiment("bad-cluster", "a seed that cannot start", (
+        ex.RunSpec("dqn", "dqn", "CartPole-v1", 600, (0,), {"hidden": [16], "gamma": 2.0}),))
+    monkeypatch.setitem(ex.EXPERIMENTS, bad.name, lambda: bad)
+    with pytest.raises(ValueError) as local:
+        ex.run_experiment(bad.name, results=tmp_path / "local", work=tmp_path / "runs-local", progress=False)
+    with pytest.raises(ValueError) as remote:
+        ex.run_experiment(bad.name, results=tmp_path / "results", work=tmp_path / "runs", ray="auto", progress=False)
+    assert type(remote.value) is type(local.value) and str(remote.value) == str(local.value)
 
 
 def board_state(ray) -> dict:
@@ -157,6 +170,7 @@ def test_a_killed_worker_is_retried_and_resumes_from_its_checkpoint(cluster, ref
     assert "died at" in line and "resuming from its checkpoint" in line, line
     meta = json.loads((result_dir / "meta.json").read_text())
     assert len(meta["resumes"]) == 1 and 0 < meta["resumes"][0]["step"] < 4_000
+    assert meta["timing"]["from_step"] == meta["resumes"][0]["step"]  # the session that finished it, timed
     assert not (result_dir / ex.SNAPSHOT).exists()  # the finished seed replaced its snapshot
     assert_same_training(results, reference, "long", meta=False)  # resumed between two steps: the same run
 
