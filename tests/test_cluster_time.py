@@ -1,5 +1,7 @@
 """rlbook.cluster_time: each seed's cost from the records, and the wall time of all seeds on N machines."""
 
+import json
+
 import pytest
 
 from rlbook import paths
@@ -38,3 +40,21 @@ def test_seed_costs_of_the_stored_records():
         assert 0 < r["hours"] < 100 and r["source"].split(" ")[0].endswith(".json")
     longest = max(costs, key=lambda r: r["hours"])
     assert (longest["experiment"], longest["run"]) == ("ddpg-report-humanoid", "large")
+
+
+def test_a_runs_own_timing_replaces_the_records_estimate(tmp_path):
+    from rlbook.cluster_time import measured
+
+    row = {"experiment": "dqn-cartpole", "run": "dqn", "hours": 0.5, "seeds": 5, "cores": 1, "source": "a record"}
+    folder = tmp_path / "dqn-cartpole" / "dqn"
+    for seed, wall, since in ((0, 360.0, 0), (1, 720.0, 0), (2, 1_800.0, 0)):
+        (folder / f"seed-{seed}").mkdir(parents=True)
+        (folder / f"seed-{seed}" / "policy.pt").write_bytes(b"")
+        (folder / f"seed-{seed}" / "meta.json").write_text(
+            json.dumps({"timing": {"wall_seconds": wall, "cpu_seconds": wall, "from_step": since}}))
+    (new,) = measured([row], tmp_path)
+    assert new["hours"] == 0.2 and new["source"].startswith("its 3 seed(s)' own wall time")
+    # a seed timed over its last session only (resumed) leaves the record's estimate in place
+    (folder / "seed-2" / "meta.json").write_text(
+        json.dumps({"timing": {"wall_seconds": 10.0, "cpu_seconds": 10.0, "from_step": 500}}))
+    assert measured([row], tmp_path) == [row]
