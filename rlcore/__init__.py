@@ -7,6 +7,7 @@ The algorithms, each a ``Config``, the math as small functions, and a ``train`` 
 
 - :mod:`rlcore.tabular`     tabular Q-learning and SARSA, value iteration
 - :mod:`rlcore.dqn`         DQN with Double, Dueling and Prioritized switches
+- :mod:`rlcore.reinforce`   REINFORCE, the policy gradient with Monte-Carlo returns and no critic
 - :mod:`rlcore.a2c`         A2C, synchronous advantage actor-critic
 - :mod:`rlcore.ppo`         PPO, clipped and adaptive-KL
 - :mod:`rlcore.dppo`        PPO on N data-parallel workers (torchrun)
@@ -16,7 +17,7 @@ The algorithms, each a ``Config``, the math as small functions, and a ``train`` 
 
 What they share:
 
-- :mod:`rlcore.onpolicy`    the on-policy core of A2C, PPO and DPPO: actor-critic, rollouts, GAE
+- :mod:`rlcore.onpolicy`    the on-policy core of A2C, PPO, DPPO and REINFORCE: actor-critic, rollouts, GAE
 - :mod:`rlcore.offpolicy`   the off-policy core of DDPG, TD3 and SAC: the loop, actor, critics, replay set-up
 - :mod:`rlcore.harness`     everything around a training loop: run folder, resume, checkpoints, logs, evaluation
 - :mod:`rlcore.nets`        ``mlp()`` and the Q-network, dueling, actor and critic heads

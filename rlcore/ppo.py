@@ -2,12 +2,13 @@
 
 One implementation, two objectives (``Config.objective``):
 
-- ``"clip"``: L = E[ min(r_t A_t, clip(r_t, 1 - eps, 1 + eps) A_t) ]
-- ``"kl"``:   L = E[ r_t A_t ] - beta * KL[pi_old || pi],  beta adapted after every update
+- ``"clip"``: L = E[ min(rho_t A_t, clip(rho_t, 1 - eps, 1 + eps) A_t) ]
+- ``"kl"``:   L = E[ rho_t A_t ] - beta * KL[pi_old || pi],  beta adapted after every update
   (the course report's rule: beta <- alpha * beta if KL > beta_high * KL_target,
   beta <- beta / alpha if KL < beta_low * KL_target)
 
-with r_t = pi(a_t | s_t) / pi_old(a_t | s_t). The loop (Schulman et al. 2017, Algorithm 1):
+with the probability ratio rho_t = pi(a_t | s_t) / pi_old(a_t | s_t) (the PPO paper's r_t; r_t is the reward here).
+The loop (Schulman et al. 2017, Algorithm 1):
 
     for each iteration:
         run the policy in num_envs environments for n_steps steps
@@ -133,14 +134,14 @@ class Config:
 
 
 def clipped_surrogate(ratio: torch.Tensor, advantages: torch.Tensor, clip_range: float) -> torch.Tensor:
-    """-E[min(r A, clip(r, 1-eps, 1+eps) A)]: the clipped objective, negated to be minimized."""
+    """-E[min(rho A, clip(rho, 1-eps, 1+eps) A)], rho the probability ratio: the clipped objective, negated."""
     unclipped = ratio * advantages
     clipped = torch.clamp(ratio, 1.0 - clip_range, 1.0 + clip_range) * advantages
     return -torch.min(unclipped, clipped).mean()
 
 
 def kl_penalty_surrogate(ratio: torch.Tensor, advantages: torch.Tensor, kl: torch.Tensor, beta: float) -> torch.Tensor:
-    """-(E[r A] - beta * KL[pi_old || pi]): the KL-penalized objective, negated to be minimized."""
+    """-(E[rho A] - beta * KL[pi_old || pi]): the KL-penalized objective, negated to be minimized."""
     return -(ratio * advantages).mean() + beta * kl
 
 
