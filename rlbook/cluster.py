@@ -352,9 +352,11 @@ def seed_nodes(ray) -> dict[str, str]:
     where: dict[str, str] = {}
     for actor in ray.util.list_named_actors(all_namespaces=True):
         if actor["namespace"] == NAMESPACE and actor["name"].startswith(BOARD_PREFIX):
-            board = ray.get_actor(actor["name"], namespace=NAMESPACE)
-            for key, seed in ray.get(board.state.remote()).items():
-                where[key] = seed["attempts"][-1]["node"]
+            try:
+                seeds = ray.get(ray.get_actor(actor["name"], namespace=NAMESPACE).state.remote())
+            except (ValueError, ray.exceptions.RayActorError):  # its command has just ended: the board goes away
+                continue
+            where.update({key: seed["attempts"][-1]["node"] for key, seed in seeds.items()})
     return where
 
 

@@ -131,11 +131,14 @@ def test_a_seeds_own_error_comes_back_as_itself(cluster, tmp_path, monkeypatch):
 
 
 def board_state(ray) -> dict:
-    """Every seed on the boards of this cluster."""
+    """Every seed on the boards of this cluster that are alive."""
     seeds = {}
     for actor in ray.util.list_named_actors(all_namespaces=True):
         if actor["name"].startswith(BOARD_PREFIX):
-            seeds.update(ray.get(ray.get_actor(actor["name"], namespace=NAMESPACE).state.remote()))
+            try:
+                seeds.update(ray.get(ray.get_actor(actor["name"], namespace=NAMESPACE).state.remote()))
+            except (ValueError, ray.exceptions.RayActorError):  # the board of a finished command, going away
+                continue
     return seeds
 
 
@@ -161,8 +164,10 @@ def test_a_killed_worker_is_retried_and_resumes_from_its_checkpoint(cluster, ref
     (line,) = ex.snapshot_experiment(TINY.name, only=["long"], results=results, work=work, ray="auto")
     assert line.startswith(f"{TINY.name}/long/seed-0: snapshot at step ") and line.endswith(")"), line
     assert json.loads((result_dir / ex.SNAPSHOT).read_text())["steps"] == 4_000
-    (seed,) = board_state(ray).values()
-    os.kill(seed["attempts"][-1]["pid"], signal.SIGKILL)
+    key, deadline = f"{TINY.name}/long/seed-0", time.monotonic() + 60
+    while key not in (seeds := board_state(ray)) and time.monotonic() < deadline:
+        time.sleep(0.05)  # the cluster's list of named actors can lag behind a moment
+    os.kill(seeds[key]["attempts"][-1]["pid"], signal.SIGKILL)
     thread.join(timeout=300)
     assert not thread.is_alive()
     (line,) = out["lines"]
