@@ -124,7 +124,12 @@ def versions() -> dict[str, str]:
 
 def command_line() -> str | None:
     """How this process was started, as a user would type it: ``python -m rlcore ...`` for a module of a package
-    (``python -m rlcore train ...``, ``python -m rlbook experiments run ...``), else the script's name."""
+    (``python -m rlcore train ...``, ``python -m rlbook experiments run ...``), else the script's name.
+
+    A process that trains for a command typed elsewhere (a Ray task of ``experiments run --ray``, on another
+    machine) records that command, which it finds in ``RLCORE_COMMAND``."""
+    if os.environ.get("RLCORE_COMMAND"):
+        return os.environ["RLCORE_COMMAND"]
     if not sys.argv or not sys.argv[0]:
         return None
     prog = Path(sys.argv[0]).resolve()

@@ -159,6 +159,7 @@ def test_the_recorded_command_names_the_module_a_user_would_run(monkeypatch):
     import rlcore
     from rlcore.provenance import command_line
 
+    monkeypatch.delenv("RLCORE_COMMAND", raising=False)
     package = Path(rlcore.__file__).resolve().parent
     monkeypatch.setattr("sys.argv", [str(package / "__main__.py"), "train", "dqn"])
     assert command_line() == "python -m rlcore train dqn"
@@ -169,6 +170,9 @@ def test_the_recorded_command_names_the_module_a_user_would_run(monkeypatch):
     assert command_line() == "python -m rlbook experiments run x"
     monkeypatch.setattr("sys.argv", ["/somewhere/benchmarks/ppo_vs_sb3.py", "--steps", "10"])
     assert command_line() == "ppo_vs_sb3.py --steps 10"
+    # a process that trains for a command typed on another machine (a Ray task) records that command
+    monkeypatch.setenv("RLCORE_COMMAND", "python -m rlbook experiments run x --ray auto")
+    assert command_line() == "python -m rlbook experiments run x --ray auto"
 
 
 @pytest.mark.parametrize("raw", ["0", "-1", "two", ""])
