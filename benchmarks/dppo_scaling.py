@@ -78,7 +78,7 @@ def main() -> None:
     p.add_argument("--out", default="results/benchmarks/dppo-scaling.json")
     args = p.parse_args()
 
-    from rlcore.runs import git_commit, versions
+    from rlcore.provenance import git_commit, versions
 
     load_before = os.getloadavg()
     results = []

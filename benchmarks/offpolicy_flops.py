@@ -147,12 +147,12 @@ def capture_learn(algo: str, env_id: str, hidden: Sequence[int] = (256, 256), ba
     captured: dict[str, Any] = {}
 
     class CapturingLoop(offpolicy.OffPolicyLoop):
-        def run_until(self, steps, act, learn, **kwargs):
+        def run_until(self, steps, act, learn, *args, **kwargs):
             def first(step, mb):
                 captured.setdefault("learn", learn)
                 captured.setdefault("minibatch", mb)
                 return learn(step, mb)
-            return super().run_until(steps, act, first, **kwargs)
+            return super().run_until(steps, act, first, *args, **kwargs)
 
     config = module.Config(hidden=tuple(hidden), batch_size=batch, learning_starts=batch, buffer_size=10 * batch,
                            eval_every=0, checkpoint_every=10**12)

@@ -158,8 +158,9 @@ def rlcore_run(env_id: str, steps: int, seed: int, cfg: dict[str, object]) -> fl
         def __init__(self, run, env, *args, **kwargs):
             super().__init__(run, timed_env(env, timers), *args, **kwargs)
 
-        def run_until(self, steps, act, learn, **kwargs):
-            return super().run_until(steps, timers.wrap(act, "acting"), timers.wrap(learn, "networks"), **kwargs)
+        def run_until(self, steps, act, learn, *args, **kwargs):
+            return super().run_until(steps, timers.wrap(act, "acting"), timers.wrap(learn, "networks"), *args,
+                                     **kwargs)
 
     sample = offpolicy.Minibatch.__dict__["sample"]
     module.OffPolicyLoop, saved_loop = TimedLoop, module.OffPolicyLoop

@@ -105,7 +105,7 @@ def main() -> None:
     torch.set_num_threads(1)
 
     from rlbook.peers import peer_path
-    from rlcore.runs import git_commit
+    from rlcore.provenance import git_commit
 
     settings, budget = sb3_settings(args.env)
     steps = args.steps or budget

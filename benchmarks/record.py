@@ -32,12 +32,12 @@ def cpu_model() -> str:
 
 def provenance(command: str, load_start: Sequence[float] | None = None,
                peers: Sequence[str] = ()) -> dict[str, object]:
-    """The command, the versions of what the numbers depend on (:func:`rlcore.runs.versions`, and of each package
+    """The command, the versions of what the numbers depend on (:func:`rlcore.provenance.versions`, and of each package
     in ``peers``, e.g. ``stable_baselines3``), the machine (its CPU model, :func:`cpu_model`) with torch's thread count and, from ``load_start`` on,
     the load average before and now, and the commit."""
     import torch
 
-    from rlcore.runs import git_commit, versions
+    from rlcore.provenance import git_commit, versions
 
     machine = {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
                "cpu_model": cpu_model(), "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads()}

@@ -10,7 +10,8 @@ Each run trains in a work folder (``runs/<experiment>/<run>/seed-<s>/``, not com
 full checkpoints with replay memories) and, when it finishes, its small outputs are copied to
 ``results/<experiment>/<run>/seed-<s>/``:
 
-    config.json  meta.json     what ran: algorithm, environment, Config, seed, steps; command, versions, commit
+    config.json  meta.json     what ran: algorithm, environment, Config, seed, steps; command, versions, commit;
+                               the wall and CPU seconds of the session that finished it (timing)
     progress.csv eval.csv      per-episode training returns; periodic evaluations of the deterministic policy
     policy.pt                  the final policy's weights only (loads with weights_only=True)
 
@@ -26,6 +27,8 @@ The package, one idea a module. It imports :mod:`rlcore`; :mod:`rlcore` never im
 - :mod:`rlbook.paths`: where the book is (``RLBOOK_ROOT``, or the checkout around the working directory);
 - :mod:`rlbook.registry`: the named experiments (``RunSpec``, ``Experiment``, ``EXPERIMENTS``);
 - :mod:`rlbook.runner`: training them, one process per core, resumable; snapshots of seeds still training;
+- :mod:`rlbook.cluster`: the same on a Ray cluster (``experiments run --ray``; Ray is optional);
+  :mod:`rlbook.cluster_time`: how the experiments' wall time would scale with machines;
 - :mod:`rlbook.results`: reading ``results/`` (or a short live stand-in) and its provenance;
 - :mod:`rlbook.analysis`: the statistics and tables the chapters quote;
 - :mod:`rlbook.pages`: an experiment's runs as a page loads, labels and describes them; ``check_printed``;

@@ -4,6 +4,7 @@
     python -m rlbook experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
     python -m rlbook experiments status dqn-cartpole
     python -m rlbook experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
+    python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir /shared/runs   # on a Ray cluster
 
 Training one agent, evaluating and rendering it are the library's: ``python -m rlcore train | evaluate | render``.
 """
@@ -14,7 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, seed_list
+from rlcore.cli import EXIT_INTERRUPTED, Parser, count, run_command, seed_list
 
 
 def cmd_experiments(args: argparse.Namespace) -> int:
@@ -44,13 +45,13 @@ def cmd_experiments(args: argparse.Namespace) -> int:
         return 0
     if args.action == "snapshot":
         for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
-                                           work=work, policy=args.policy):
+                                           work=work, policy=args.policy, ray=args.ray):
             print(line)
         return 0
     if args.action == "run":
         try:
             lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
-                                      results=results, work=work)
+                                      results=results, work=work, ray=args.ray)
         except KeyboardInterrupt:
             print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
                   "when you run the same command again.", file=sys.stderr)
@@ -69,7 +70,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "snapshot: copy the logs so far of seeds still training to results/ (with --policy, the "
                         "policy of their last checkpoint too)")
     x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
-    x.add_argument("--jobs", type=count(1), default=1, help="runs in parallel, one process each (one per core)")
+    x.add_argument("--jobs", type=count(1), help="runs in parallel, one process each (one per core; default 1); "
+                                                  "with --ray local, the CPUs of the local cluster (default all)")
+    x.add_argument("--ray", metavar="ADDRESS",
+                   help="run: each seed as a task on a Ray cluster (auto: the one `ray start` joined this machine "
+                        "to; HOST:PORT; local: start one on this machine), results written here; snapshot: take "
+                        "each seed's snapshot on the node where it trains. Needs `pip install ray==2.60.0`")
     x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
     x.add_argument("--seeds", type=seed_list, help="comma-separated subset of the seeds, e.g. 0,1")
     x.add_argument("--episodes", type=count(1), default=5, help="reevaluate: episodes per seed")
@@ -78,26 +84,15 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--root", help="the book's folder (default: RLBOOK_ROOT, else the checkout holding the current "
                                   "folder); --results and --work default to its results/ and runs/")
     x.add_argument("--results", help="where finished runs' small outputs go (default: ROOT/results)")
-    x.add_argument("--work", help="where runs train and keep full checkpoints (default: ROOT/runs)")
+    x.add_argument("--work", "--runs-dir", dest="work",
+                   help="where runs train and keep full checkpoints (default: ROOT/runs); with --ray, the same path "
+                        "on every node: on storage every node sees, a seed retried elsewhere resumes there")
     x.set_defaults(func=cmd_experiments)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rlcore.algos import UnknownAlgorithmError
-    from rlcore.checkpoint import CheckpointError
-    from rlcore.envs import UnknownEnvironmentError
-    from rlcore.render import HeadlessGLError
-    from rlcore.runs import loaded_commit, stop_on_signals
-
-    args = build_parser().parse_args(argv)
-    loaded_commit()  # the commit of the code this process loaded, which its runs record
-    stop_on_signals()  # a `kill` (SIGTERM) or Ctrl-C: checkpoint, then stop
-    try:
-        return args.func(args)
-    except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+    return run_command(build_parser().parse_args(argv))
 
 
 if __name__ == "__main__":

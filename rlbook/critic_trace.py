@@ -8,14 +8,14 @@ the trace checks that they agree before it says anything about the stored run::
     python -m rlbook.critic_trace ddpg-modern-1m/humanoid --seeds 1,2 --steps 100000 \\
         --out results/diagnostics/ddpg-modern-1m-humanoid-critic.json
 
-A probe only reads what the critic update is given (:class:`CriticProbe`, passed to :func:`rlcore.ddpg.train`);
+A probe only reads what the critic update is given (:class:`CriticProbe`, the off-policy core's per-update hook,
+:data:`rlcore.offpolicy.UpdateHook`, passed to ``train(on_update=...)``);
 the record holds, per seed, one row per probed update (:data:`COLUMNS`) and the provenance. ``--set key=value``
 asks a what-if instead (``--set critic_lr=3e-4``): the same seed with a changed setting, no longer the stored run.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import dataclass, field
@@ -26,7 +26,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from rlcore.offpolicy import Minibatch
+from rlcore.offpolicy import Minibatch, Update
 
 COLUMNS = ("step", "learn_step", "y_mean", "y_max", "q_mean", "q_absmax", "loss", "r_mean", "obs_clipped")
 """One row per probed update: environment step, learning step (1 = the first update), the minibatch's mean and
@@ -48,16 +48,16 @@ def critic_stats(critic: torch.nn.Module, target: Callable[[], torch.Tensor], mb
                 "weight_norms": [float(p.norm()) for p in critic.parameters() if p.dim() >= 2]}
 
 
-TRACEABLE = ("ddpg", "td3")
-"""The algorithms whose train() takes a probe."""
+TRACEABLE = ("ddpg", "td3", "sac")
+"""The algorithms whose train() takes an ``on_update`` hook: the off-policy core's."""
 
 
 @dataclass
 class CriticProbe:
-    """Called before every learning step of an off-policy ``train`` (:data:`rlcore.offpolicy.Probe`); records
+    """Called before every learning step of an off-policy ``train`` (:data:`rlcore.offpolicy.UpdateHook`); records
     :func:`critic_stats` on the 1st, (every+1)-th, (2 every+1)-th ... update. It computes with ``no_grad``, and
-    computes the targets with torch's random generator forked (TD3's target noise draws from it: the update then
-    draws the same noise), so the run it watches is the run without it."""
+    computes the targets with torch's random generator forked (TD3's target noise and SAC's next actions draw from
+    it: the update then draws the same), so the run it watches is the run without it."""
 
     every: int = 500
     rows: list[dict[str, Any]] = field(default_factory=list)
@@ -67,13 +67,12 @@ class CriticProbe:
         if self.every < 1:
             raise ValueError(f"every must be at least 1, got {self.every}")
 
-    def __call__(self, step: int, mb: Minibatch, critic: torch.nn.Module, target: Callable[[], torch.Tensor],
-                 gamma: float) -> None:
+    def __call__(self, update: Update) -> None:
         self.updates += 1
         if (self.updates - 1) % self.every == 0:
             with torch.random.fork_rng(devices=[]):
-                stats = critic_stats(critic, target, mb)
-            self.rows.append({"step": int(step), "learn_step": self.updates, **stats})
+                stats = critic_stats(update.critic, update.targets, update.minibatch)
+            self.rows.append({"step": int(update.step), "learn_step": self.updates, **stats})
 
 
 def settings_for(algo: str, spec: Any) -> dict[str, Any]:
@@ -114,7 +113,7 @@ def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 50
     module = get_algorithm(algo)
     config = module.make_config(algo, **{**settings_for(algo, spec), **(changes or {})})
     probe = CriticProbe(every)
-    res = module.train(spec.env_id, config, steps=steps, seed=seed, out=None, progress=progress, probe=probe)
+    res = module.train(spec.env_id, config, steps=steps, seed=seed, out=None, progress=progress, on_update=probe)
     return {"rows": probe.rows, "eval_steps": [int(s) for s in res.eval_steps],
             "eval_returns": [float(r) for r in res.eval_returns]}
 
@@ -179,7 +178,9 @@ def first_runaway(seed_trace: dict[str, Any], gamma: float, factor: float = 10.0
 
 def main(argv: list[str] | None = None) -> int:
     from rlcore.cli import EXIT_INTERRUPTED, EXIT_USAGE, Parser, count, overrides, seed_list
-    from rlcore.runs import run_metadata, torch_threads, write_json
+    from rlcore.machine import torch_threads
+    from rlcore.provenance import run_metadata
+    from rlcore.runs import write_json
 
     p = Parser(prog="python -m rlbook.critic_trace", description=__doc__.split("\n\n")[0])
     p.add_argument("run", metavar="EXPERIMENT/RUN", help="a DDPG run of the registry, e.g. ddpg-modern-1m/humanoid")

@@ -48,7 +48,7 @@ def stored(s: SeedResult, name: str, params: dict[str, Any], compute: Callable[[
     was stored with the same ``params`` for the same ``policy.pt``; otherwise ``compute()`` now, and, with ``write``
     (default: the environment variable ``RLCORE_STORE_REEVALUATIONS=1``), store it there with the command, the commit
     and the processor (one record per ``params``). ``compute`` returns a dict of numbers and lists of numbers."""
-    from rlcore.runs import run_metadata
+    from rlcore.provenance import run_metadata
 
     path = s.folder / f"{name}.json"
     sha = _policy_sha256(s)

@@ -186,7 +186,7 @@ def provenance_markdown(name: str, run: RunResults, command: str | None = None) 
             f"seed {seed} at step {r['step']:,} ({r.get('machine', {}).get('cpus', '?')} CPUs, commit "
             f"{str(r.get('commit'))[:7]}, PyTorch {r.get('versions', {}).get('torch')})" for seed, r in resumes) + "."
     moved = [(s.seed, s.meta["checkout_at_start"]) for s in run.seeds if s.meta.get("checkout_at_start")]
-    if moved:  # a long-lived process ran code it had loaded before the checkout moved on (see rlcore.runs)
+    if moved:  # a long-lived process ran code it had loaded before the checkout moved on (see rlcore.provenance)
         text += " Trained by a process that had loaded its code earlier: " + "; ".join(
             f"seed {seed} (the checkout was already at {str(c)[:7]})" for seed, c in moved) + "."
     notes: dict[str, list[int]] = {}
@@ -243,8 +243,8 @@ def commit_text(commit: str) -> str:
 def live_provenance_markdown(label: str, what: str, command: str | None = None) -> str:
     """The provenance of a run a page trained itself while the book was built, in a collapsed dropdown
     ("Provenance: <label>"): ``what`` it was (seed, steps, settings), the command line that repeats it, and the
-    commit, versions and machine of the process that trained it (this one: :func:`rlcore.runs.run_metadata`)."""
-    from rlcore.runs import run_metadata
+    commit, versions and machine of the process that trained it (this one: :func:`rlcore.provenance.run_metadata`)."""
+    from rlcore.provenance import run_metadata
 
     meta = run_metadata()
     v, commit = meta["versions"], meta.get("commit") or "unknown"
@@ -259,7 +259,7 @@ def live_provenance_markdown(label: str, what: str, command: str | None = None) 
 def record_provenance_markdown(label: str, path: str, record: dict[str, Any], what: str) -> str:
     """The provenance of a derived record in ``results/`` (a comparison, a diagnostic) in a collapsed dropdown
     ("Provenance: <label>"): its file, the command that wrote it, the commit, time and versions of the process that
-    did (``record["provenance"]``, :func:`rlcore.runs.run_metadata`), and ``what`` it measures."""
+    did (``record["provenance"]``, :func:`rlcore.provenance.run_metadata`), and ``what`` it measures."""
     prov = record["provenance"]
     v = prov["versions"]
     return (f"::::{{dropdown}} Provenance: {label}\n"

@@ -7,9 +7,12 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
+import resource
 import shutil
 import signal
 import subprocess
+import sys
+import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -55,24 +58,57 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
     """Train (or resume) one seed in ``work`` and copy its small outputs to ``results`` (default: the book's
     ``runs/`` and ``results/``, :mod:`rlbook.paths`); returns a status line."""
     from rlcore.algos import get_algorithm
-    from rlcore.runs import torch_threads
+    from rlcore.machine import torch_threads
 
     torch_threads()  # one per process unless RLCORE_TORCH_THREADS says more (one long run on an idle machine)
     work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
     if (result_dir / "policy.pt").exists():
         return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
+    started = (time.perf_counter(), cpu_seconds())
     if spec.algo == "dppo":  # one process per worker, started by torchrun; each worker with one torch thread
-        subprocess.run(distributed_command(spec, seed, work_dir), check=True,
-                       env={**os.environ, "OMP_NUM_THREADS": "1"})
+        run_torchrun(distributed_command(spec, seed, work_dir), {**os.environ, "OMP_NUM_THREADS": "1"})
     else:
         module = get_algorithm(spec.algo)
         config = module.make_config(spec.algo, **spec.overrides)
         module.train(spec.env_id, config, steps=spec.steps, seed=seed, out=work_dir, progress=False)
     copy_logs(work_dir, result_dir)
+    record_timing(result_dir / "meta.json", time.perf_counter() - started[0], cpu_seconds() - started[1])
     export_policy(work_dir / "checkpoint.pt", result_dir / "policy.pt")
     for name in (SNAPSHOT, SNAPSHOT_POLICY):  # the finished seed replaces its in-progress snapshot
         (result_dir / name).unlink(missing_ok=True)
     return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process and of its children that have ended (torchrun and its workers)."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
+def record_timing(meta: Path, wall: float, cpu: float) -> None:
+    """Add to a seed's results ``meta.json`` what its last session took: ``timing`` = wall and CPU seconds (the
+    process's and its workers'), and the step that session started from (0, or its last resume's)."""
+    from rlcore.runs import write_json
+
+    record = json.loads(meta.read_text())
+    record["timing"] = {"wall_seconds": round(wall, 3), "cpu_seconds": round(cpu, 3),
+                        "from_step": int(record["resumes"][-1]["step"]) if record.get("resumes") else 0}
+    write_json(meta, record)
+
+
+def run_torchrun(cmd: list[str], env: dict[str, str]) -> None:
+    """Run a torchrun job to its end; an interrupt of this process (Ctrl-C, a pool's or Ray's cancel) is passed
+    to torchrun as SIGINT, which stops its workers (they checkpoint every update), and waited for, so that no
+    worker is left behind."""
+    job = subprocess.Popen(cmd, env=env)
+    try:
+        code = job.wait()
+    except KeyboardInterrupt:
+        job.send_signal(signal.SIGINT)
+        job.wait()
+        raise
+    if code:
+        raise subprocess.CalledProcessError(code, cmd)
 
 
 LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv", "alpha.csv")
@@ -105,7 +141,7 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None
     logs only grow, and their rows up to any step are what the resumed run writes again.
     """
     from rlcore.logger import read_csv
-    from rlcore.runs import run_metadata
+    from rlcore.provenance import run_metadata
 
     work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
     where = f"{exp}/{spec.name}/seed-{seed}"
@@ -129,12 +165,17 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None
 
 
 def snapshot_experiment(name: str, only: list[str] | None = None, seeds: list[int] | None = None,
-                        results: Path | None = None, work: Path | None = None, policy: bool = False) -> list[str]:
-    """:func:`snapshot_one` for every chosen seed of an experiment."""
-    chosen = chosen_runs(name, only)
+                        results: Path | None = None, work: Path | None = None, policy: bool = False,
+                        ray: str | None = None) -> list[str]:
+    """:func:`snapshot_one` for every chosen seed of an experiment; with ``ray`` (a cluster's address), on the node
+    where each seed trains (:func:`rlbook.cluster.snapshot_on_ray`)."""
+    picks = [(spec, s) for spec in chosen_runs(name, only) for s in spec.seeds if seeds is None or s in seeds]
     results, work = results or paths.results_dir(), work or paths.work_dir()
-    return [snapshot_one(name, spec, s, results, work, policy) for spec in chosen
-            for s in spec.seeds if seeds is None or s in seeds]
+    if ray:
+        from rlbook.cluster import snapshot_on_ray
+
+        return snapshot_on_ray(name, picks, results, work.resolve(), ray, policy)
+    return [snapshot_one(name, spec, s, results, work, policy) for spec, s in picks]
 
 
 def train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: Path, work: Path,
@@ -162,10 +203,10 @@ def run_in_pool(fn: Callable[..., Any], calls: list[tuple], jobs: int):
     A call is handed to a worker only when one is free, so that when one fails, or the run is interrupted, no
     further call starts: the error is raised once the calls already running have returned. (Submitting
     everything at once would queue calls that a pool runs even after an interrupt.) An interrupt of this
-    process (Ctrl-C, or SIGTERM with :func:`rlcore.runs.stop_on_signals`) is passed on to the workers as SIGINT:
+    process (Ctrl-C, or SIGTERM with :func:`rlcore.signals.stop_on_signals`) is passed on to the workers as SIGINT:
     each running ``train`` saves a checkpoint and stops, instead of training on to the end of its seed.
     """
-    from rlcore.runs import stop_on_signals
+    from rlcore.signals import stop_on_signals
 
     # spawn, not fork: safe from a Jupyter kernel, whose threads a fork would copy half-way
     ctx = multiprocessing.get_context("spawn")
@@ -204,13 +245,27 @@ def chosen_runs(name: str, only: list[str] | None = None) -> list[RunSpec]:
     return [spec for spec in exp.runs if not only or spec.name in only]
 
 
-def run_experiment(name: str, jobs: int = 1, only: list[str] | None = None, seeds: list[int] | None = None,
-                   results: Path | None = None, work: Path | None = None) -> list[str]:
-    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time, in ``work`` with the small
-    outputs copied to ``results`` (default: the book's ``runs/`` and ``results/``, :mod:`rlbook.paths`)."""
+def run_experiment(name: str, jobs: int | None = None, only: list[str] | None = None, seeds: list[int] | None = None,
+                   results: Path | None = None, work: Path | None = None, ray: str | None = None,
+                   progress: bool = True) -> list[str]:
+    """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time (default 1), in ``work`` with
+    the small outputs copied to ``results`` (default: the book's ``runs/`` and ``results/``, :mod:`rlbook.paths`).
+
+    With ``ray``, a Ray cluster's address (``auto``, ``HOST:PORT``, or ``local`` for one of this machine with
+    ``jobs`` CPUs, default all), each seed is a task on the cluster (:func:`rlbook.cluster.run_on_ray`), its
+    results written here all the same."""
     chosen = chosen_runs(name, only)
     tasks = [(spec, s) for spec in chosen for s in spec.seeds if seeds is None or s in seeds]
     if not tasks:
         known = sorted({s for spec in chosen for s in spec.seeds})
         raise ValueError(f"{name} has no seed {seeds} in the runs chosen; their seeds: {known}.")
-    return train_all(name, tasks, jobs, results or paths.results_dir(), work or paths.work_dir())
+    from rlcore.provenance import dirty_warning
+
+    if warning := dirty_warning():  # the runs record what was uncommitted; a clean tree needs no record
+        print(warning, file=sys.stderr)
+    results, work = results or paths.results_dir(), work or paths.work_dir()
+    if ray:
+        from rlbook.cluster import run_on_ray
+
+        return run_on_ray(name, tasks, results, work.resolve(), ray, cpus=jobs, progress=progress)
+    return train_all(name, tasks, jobs or 1, results, work, progress)

@@ -92,7 +92,8 @@ def load_comparison(path: str | Path) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rlcore.runs import run_metadata, write_json
+    from rlcore.provenance import run_metadata
+    from rlcore.runs import write_json
 
     p = argparse.ArgumentParser(prog="python -m rlbook.versus", description=__doc__.split("\n\n")[0])
     p.add_argument("--arm", action="append", required=True, metavar="EXPERIMENT/RUN",

@@ -7,6 +7,7 @@ The algorithms, each a ``Config``, the math as small functions, and a ``train`` 
 
 - :mod:`rlcore.tabular`     tabular Q-learning and SARSA, value iteration
 - :mod:`rlcore.dqn`         DQN with Double, Dueling and Prioritized switches
+- :mod:`rlcore.reinforce`   REINFORCE, the policy gradient with Monte-Carlo returns and no critic
 - :mod:`rlcore.a2c`         A2C, synchronous advantage actor-critic
 - :mod:`rlcore.ppo`         PPO, clipped and adaptive-KL
 - :mod:`rlcore.dppo`        PPO on N data-parallel workers (torchrun)
@@ -16,9 +17,9 @@ The algorithms, each a ``Config``, the math as small functions, and a ``train`` 
 
 What they share:
 
-- :mod:`rlcore.onpolicy`    the on-policy core of A2C, PPO and DPPO: actor-critic, rollouts, GAE
-- :mod:`rlcore.offpolicy`   the off-policy core of DDPG, TD3 and SAC: the loop, actor, critics, replay set-up
-- :mod:`rlcore.harness`     everything around a training loop: run folder, resume, checkpoints, logs, evaluation
+- :mod:`rlcore.onpolicy`    the on-policy core of A2C, PPO, DPPO and REINFORCE: their shared Config, actor-critic, rollouts, GAE
+- :mod:`rlcore.offpolicy`   the off-policy core of DDPG, TD3 and SAC: the loop and its per-update hook, actor, critics
+- :mod:`rlcore.harness`     everything around a training loop: resume, checkpoints, logs, evaluation, best policy
 - :mod:`rlcore.nets`        ``mlp()`` and the Q-network, dueling, actor and critic heads
 - :mod:`rlcore.buffers`     replay buffer, sum tree, prioritized replay
 - :mod:`rlcore.noise`       Gaussian, Ornstein-Uhlenbeck and adaptive parameter noise
@@ -33,7 +34,10 @@ Around a run:
 
 - :mod:`rlcore.evaluate`    evaluation episodes and statistics over seeds
 - :mod:`rlcore.checkpoint`  atomic save, ``weights_only=True`` load
-- :mod:`rlcore.runs`        a run's output folder and what it records about itself (command, versions, commit)
+- :mod:`rlcore.runs`        a run's output folder: opening it, new or to resume
+- :mod:`rlcore.provenance`  what a run records about itself: command, versions, commit and uncommitted changes
+- :mod:`rlcore.machine`     the processor and its kernels; torch's thread count for training
+- :mod:`rlcore.signals`     Ctrl-C and ``kill`` end a run with a checkpoint, written whole
 - :mod:`rlcore.logger`      CSV progress logs
 - :mod:`rlcore.plots`       learning curves with a band over seeds, and per-seed scores
 - :mod:`rlcore.render`      offscreen rollouts to frames and GIFs

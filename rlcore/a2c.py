@@ -19,7 +19,7 @@ run on it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,12 +28,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.config import check_budget, check_config
+from rlcore.config import check_budget
 from rlcore.envs import make_env, pending_resets
-from rlcore.harness import Run, evaluation, running_stats, torch_rng
-from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, Rollout, annealing,  # noqa: F401
-                             collect_rollout, deterministic_policy, gae, make_agent, make_envs, normalize,
-                             saved_policy, set_learning_rate, training_statistics, valid_batch)
+from rlcore.harness import Evaluation, Run, evaluation, running_stats, torch_rng
+from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, OnPolicyConfig,  # noqa: F401
+                             Rollout, annealing, collect_rollout, deterministic_policy, gae, make_agent, make_envs,
+                             normalize, saved_policy, set_learning_rate, training_statistics, valid_batch)
 from rlcore.onpolicy import check_spaces as _check_spaces
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
@@ -43,68 +43,23 @@ OPTIMIZERS = ("rmsprop", "adam")
 
 
 @dataclass
-class Config:
-    """Hyperparameters of A2C (defaults: Stable-Baselines3's A2C, the RL Zoo's CartPole-v1 settings)."""
+class Config(OnPolicyConfig):
+    """Hyperparameters of A2C (defaults: Stable-Baselines3's A2C, the RL Zoo's CartPole-v1 settings). The fields A2C
+    shares with PPO and DPPO are :class:`rlcore.onpolicy.OnPolicyConfig`'s; these are its own."""
 
-    num_envs: int = 8
-    """Environments stepped in parallel (a Gymnasium vector environment); A3C's parallel actors."""
-    n_steps: int = 5
-    """Steps per environment per iteration: returns look at most this far ahead (A3C's t_max)."""
-    gamma: float = 0.99
-    """Discount factor."""
-    gae_lambda: float = 1.0
-    """GAE's lambda; 1.0 gives plain n-step returns minus V (A3C), smaller values trade variance for bias."""
-    learning_rate: float = 7e-4
-    """Step size (one optimizer for actor and critic)."""
-    anneal_lr: bool = False
-    """Decay the step size linearly to 0 over the run."""
     optimizer: str = "rmsprop"
     """``"rmsprop"`` (A3C's choice; alpha = rms_alpha, eps = optimizer_eps) or ``"adam"``."""
     rms_alpha: float = 0.99
     """RMSprop's smoothing constant of the squared-gradient average."""
     optimizer_eps: float = 1e-5
     """The optimizer's epsilon (added to the root of the squared-gradient average)."""
-    ent_coef: float = 0.0
-    """Entropy bonus weight (A3C used 0.01 on Atari)."""
-    vf_coef: float = 0.5
-    """Value-loss weight."""
-    max_grad_norm: float = 0.5
-    """Clip the gradient's global norm to this."""
-    normalize_advantage: bool = False
-    """Standardize the advantages of each rollout (off in A3C and SB3's A2C)."""
-    normalize_obs: bool = False
-    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
-    normalize_reward: bool = False
-    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
-    hidden: tuple[int, ...] = (64, 64)
-    """Hidden layers of the actor and of the critic (separate networks)."""
-    activation: str = "tanh"
-    """Hidden-layer nonlinearity: ``"tanh"`` or ``"relu"``."""
-    ortho_init: bool = True
-    """Orthogonal initialization with a small last policy layer; False keeps PyTorch's default init."""
-    log_std_init: float = 0.0
-    """Initial log standard deviation of the Gaussian policy (continuous actions)."""
-    eval_every: int = 10_000
-    """Evaluate the deterministic policy after the first iteration past every this many steps (0: never)."""
-    eval_episodes: int = 5
-    """Episodes per evaluation."""
-    checkpoint_every: int = 50_000
-    """Write checkpoint.pt after the first iteration past every this many steps (and at the end, and on Ctrl-C)."""
     log_every: int = 10
     """Write a row of updates.csv every this many iterations."""
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    """Keyword arguments for ``gymnasium.make``."""
 
     def __post_init__(self) -> None:
-        check_config(self)
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
+        super().__post_init__()
         if self.optimizer not in OPTIMIZERS:
             raise ValueError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
-        if not 0.0 <= self.gae_lambda <= 1.0:
-            raise ValueError(f"gae_lambda must be in [0, 1], got {self.gae_lambda}")
-        if self.num_envs < 1 or self.n_steps < 1:
-            raise ValueError("num_envs and n_steps must be >= 1")
 
 
 # --- the math, one small function each ----------------------------------------------------------
@@ -233,20 +188,21 @@ def train(
     eval_env = make_env(env_id, **config.env_kwargs)
     per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)
-    run = Run("a2c", env_id, config, steps, seed, out, progress, desc=f"A2C {env_id}", target=iterations * per_iter,
-              schedules=annealing(config), eval_at_end=True, close=(envs, eval_env),
-              evaluate=lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
-                                          config.eval_episodes, seed + 10_000),
-              logs={"updates": UPDATE_COLUMNS}, defer_interrupts=True)
-    run.track(agent=agent, optimizer=optimizer, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
-              ret=running_stats(ret_rms, "ret"), spaces=spaces, obs_clip=OBS_CLIP)
+    run = Run("a2c", env_id, config, steps, seed, out, progress, target=iterations * per_iter,
+              schedules=annealing(config), close=(envs, eval_env), logs={"updates": UPDATE_COLUMNS},
+              evaluation=Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
+                                                       config.eval_episodes, seed + 10_000), at_end=True,
+                                    keep_best=POLICY_KEYS))
+    run.restores(agent=agent, optimizer=optimizer, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
+                 ret=running_stats(ret_rms, "ret"))
+    run.records(spaces=spaces, obs_clip=OBS_CLIP)
     step, iteration = run.resume(step=0, iteration=0)
     buf = Rollout(spaces, config.n_steps, config.num_envs)
 
     def on_episode(t: int, episode_return: float, length: int) -> None:  # an episode ended at rollout step t
         run.record_episode(step + (t + 1) * config.num_envs, episode_return, length)
 
-    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration, observation=lambda: obs)
+    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration)
     buf.ended = pending_resets(envs)  # the copies whose episode ended on the step before the checkpoint
     with run:
         while iteration < iterations:
@@ -263,7 +219,7 @@ def train(
             # [/a2c-loop]
             if iteration % config.log_every == 0 or iteration == iterations:
                 run.log("updates", iteration=iteration, step=step, learning_rate=lr, **stats)
-            run.step_done(step, step - per_iter, iteration=iteration)
+            run.step_done(step, step - per_iter, obs, iteration=iteration)
     return Result(agent, deterministic_policy(agent, spaces, obs_rms), run.episode_returns, run.episode_end_steps,
                   run.eval_steps, run.eval_returns, step)
 

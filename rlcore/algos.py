@@ -7,7 +7,7 @@ Each name maps to a module that provides:
   and saves a checkpoint on Ctrl-C;
 - ``load_policy(checkpoint) -> policy``: the deterministic policy, a callable from observation to action.
 
-Later chapters add their algorithms here (``dqn``, ``a2c``, ``ppo``, ``dppo``, ``ddpg``, ``td3``, ``sac``).
+Later chapters add their algorithms here (``dqn``, ``a2c``, ``reinforce``, ``ppo``, ``dppo``, ``ddpg``, ``td3``, ``sac``).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ ALGORITHMS: dict[str, str] = {
     "sarsa": "rlcore.tabular",
     "dqn": "rlcore.dqn",
     "a2c": "rlcore.a2c",
+    "reinforce": "rlcore.reinforce",
     "ppo": "rlcore.ppo",
     "dppo": "rlcore.dppo",   # one worker here; N workers with torchrun (python -m rlcore.dppo)
     "ddpg": "rlcore.ddpg",

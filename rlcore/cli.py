@@ -1,5 +1,6 @@
 """What every command line of rlcore shares (``python -m rlcore`` and ``python -m rlcore.dppo``): argument types
-that refuse a bad value in one line, ``--set key=value`` parsing, and the exit statuses.
+that refuse a bad value in one line, ``--set key=value`` parsing, the exit statuses, and :func:`run_command`, which
+runs a command and turns a user's error into one line (the book's ``python -m rlbook`` uses it too).
 
 No library module imports :mod:`rlcore.__main__`; both command lines import this.
 """
@@ -9,6 +10,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 import typing
 from typing import Any
 
@@ -50,6 +52,26 @@ def json_object(text: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise argparse.ArgumentTypeError(f"expected a JSON object such as '{{\"is_slippery\": false}}', got {text!r}")
     return value
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Run a parsed command, ``args.func(args)``, as a process's command: the commit of the code it loaded is noted
+    (its runs record it), SIGTERM and Ctrl-C checkpoint and stop, and an error a user can fix (an unknown environment
+    or algorithm, a bad checkpoint, no headless GL, a bad value) is one line on stderr and exit status 2."""
+    from rlcore.algos import UnknownAlgorithmError
+    from rlcore.checkpoint import CheckpointError
+    from rlcore.envs import UnknownEnvironmentError
+    from rlcore.render import HeadlessGLError
+    from rlcore.provenance import loaded_commit
+    from rlcore.signals import stop_on_signals
+
+    loaded_commit()
+    stop_on_signals()
+    try:
+        return args.func(args)
+    except (UnknownEnvironmentError, UnknownAlgorithmError, CheckpointError, HeadlessGLError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
 
 
 class Parser(argparse.ArgumentParser):

@@ -24,17 +24,15 @@ import torch
 from torch import nn
 
 from rlcore.config import check_budget, check_config
-from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
+from rlcore.harness import EPISODE_COLUMNS, Run, torch_rng
 from rlcore.nets import soft_update
 from rlcore.noise import exploration_state, first_behaviour, make_exploration, noise_sigma
-from rlcore.offpolicy import saved_actor
+from rlcore.offpolicy import POLICY_KEYS, policy_evaluation, saved_actor  # noqa: F401 (POLICY_KEYS: load_policy's)
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,  # noqa: F401
-                              OffPolicyConfig, OffPolicyLoop, Probe, frozen, make_replay)
+                              OffPolicyConfig, OffPolicyLoop, UpdateHook, frozen, gradient_step, make_replay)
 from rlcore.offpolicy import check_spaces as _check_spaces
 from rlcore.offpolicy import make_envs as _make_envs
 
-POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
-"""Checkpoint keys :func:`load_policy` needs."""
 
 EXPLORATION = ("gaussian", "ou", "param", "none")
 
@@ -87,22 +85,14 @@ def update_critic(critic: nn.Module, critic_opt: torch.optim.Optimizer, actor_t:
                   terminated: torch.Tensor, gamma: float) -> float:
     """One Adam step on the critic's loss (1/N) sum (y_i - Q(s_i, a_i))^2, with y from the target networks."""
     y = critic_target(actor_t, critic_t, next_obs, rewards, terminated, gamma)
-    loss = critic_loss(critic, obs, actions, y)
-    critic_opt.zero_grad(set_to_none=True)
-    loss.backward()
-    critic_opt.step()
-    return float(loss.detach())
+    return gradient_step(critic_opt, critic_loss(critic, obs, actions, y))
 
 
 def update_actor(actor: nn.Module, actor_opt: torch.optim.Optimizer, critic: nn.Module, obs: torch.Tensor) -> float:
     """One Adam step along the deterministic policy gradient: the gradient flows through the critic into the actor
     only (the critic's weights get none: the next critic update would throw it away, so skipping it saves time)."""
     with frozen(critic):
-        loss = actor_loss(actor, critic, obs)
-        actor_opt.zero_grad(set_to_none=True)
-        loss.backward()
-    actor_opt.step()
-    return float(loss.detach())
+        return gradient_step(actor_opt, actor_loss(actor, critic, obs))
 # [/ddpg-update]
 
 
@@ -148,12 +138,9 @@ def saved_policy(actor: Actor, observations: Observations) -> DeterministicPolic
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
-          out: str | Path | None = None, progress: bool = False, probe: Probe | None = None) -> Result:
-    """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint).
-
-    ``probe``, for diagnostics only, is called before every learning step (:data:`rlcore.offpolicy.Probe`); it must
-    only read, so that the run stays the run it would be without it (the book's critic trace is one).
-    """
+          out: str | Path | None = None, progress: bool = False, on_update: UpdateHook | None = None) -> Result:
+    """Train DDPG for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint). ``on_update``: a
+    read-only diagnostic called before every learning step (:data:`rlcore.offpolicy.UpdateHook`)."""
     check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
@@ -166,15 +153,14 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     noise, param_noise = make_exploration(config, sp["act_dim"], seed)
     observations = Observations(sp["obs_dim"], config.normalize_obs)  # raw, or scaled by running statistics
 
-    run = Run("ddpg", env_id, config, steps, seed, out, progress, desc=f"DDPG {env_id}", close=(env, eval_env),
-              evaluate=lambda: evaluation(saved_policy(actor, observations), eval_env, config.eval_episodes,
-                                          seed + 10_000),
-              episode_log=EPISODE_COLUMNS + ["noise_sigma"], defer_interrupts=True)
-    run.track(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
-              critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
-              torch_rng=torch_rng(), noise=exploration_state(noise, param_noise, actor), spaces=sp,
-              obs=observations.saved())
-    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
+    run = Run("ddpg", env_id, config, steps, seed, out, progress, close=(env, eval_env),
+              episode_log=EPISODE_COLUMNS + ["noise_sigma"],
+              evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
+    run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
+                 critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
+                 torch_rng=torch_rng(), noise=exploration_state(noise, param_noise, actor), obs=observations.saved())
+    run.records(spaces=sp)
+    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
     behaviour = first_behaviour(actor, param_noise)
 
@@ -202,16 +188,17 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     def learn(step: int, mb: Minibatch) -> None:
         # [ddpg-learn]
         o, a, r, o2, d = mb.tensors()
-        if probe is not None:
-            probe(step, mb, critic, lambda: critic_target(actor_t, critic_t, o2, r, d, config.gamma), config.gamma)
         update_critic(critic, critic_opt, actor_t, critic_t, o, a, r, o2, d, config.gamma)
         update_actor(actor, actor_opt, critic, o)
         soft_update(actor_t, actor, config.tau)
         soft_update(critic_t, critic, config.tau)
         # [/ddpg-learn]
 
-    step = loop.run_until(steps, act, learn, episode_columns=lambda: {"noise_sigma": noise_sigma(noise, param_noise)},
-                          episode_ended=episode_ended)
+    def targets(mb: Minibatch) -> torch.Tensor:  # what update_critic regresses on (for an on_update hook)
+        return critic_target(actor_t, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma)
+
+    step = loop.run_until(steps, act, learn, critic, targets, episode_ended=episode_ended,
+                          episode_columns=lambda: {"noise_sigma": noise_sigma(noise, param_noise)})
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns,
                   step, saved_policy(actor, observations))
 

@@ -73,19 +73,19 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 
 from rlcore import ppo
-from rlcore.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from rlcore.checkpoint import CheckpointError, save_checkpoint
 from rlcore.config import check_budget, config_dict
 from rlcore.distributed import (LAUNCH_HELP, broadcast_object, broadcast_weights, gather_rollouts,  # noqa: F401
                                 init_distributed, merge_contributions, snapshot, stats_contribution,
                                 sync_running_stats)
 from rlcore.envs import make_env
-from rlcore.harness import Run, evaluation, running_stats
+from rlcore.harness import Evaluation, Run, Workers, evaluation, running_stats
 from rlcore.launch import build_parser, launch_command  # noqa: F401 (python -m rlcore.dppo's command line)
 from rlcore.onpolicy import (OBS_CLIP, Rollout, annealing, check_spaces, collect_rollout, deterministic_policy,
                              make_agent, make_envs, set_learning_rate, training_statistics)
 from rlcore.ppo import load_policy  # noqa: F401 (what the command line loads a policy with)
 from rlcore.ppo import ppo_update, rollout_batch
-from rlcore.runs import RunDir, open_run
+from rlcore.runs import open_run
 
 ALGO = "ppo"
 """The checkpoint's ``algo``: DPPO's checkpoints are PPO's, plus a ``distributed`` entry."""
@@ -168,12 +168,8 @@ def open_on_rank0(out, env_id: str, config: Config, steps: int, seed: int, meta:
     folder = ckpt = error = None
     if dist.get_rank() == 0:
         try:
-            path = None if out is None else RunDir(out).checkpoint
-            if path is not None and path.exists() and (prior := load_checkpoint(path)).get("algo") == ALGO \
-                    and not prior.get("distributed"):
-                raise ValueError(f"{out} holds a single-process PPO run; resume it with `python -m rlcore train ppo`, "
-                                 "or choose another --out folder.")
-            folder, ckpt = open_run(out, ALGO, env_id, seed, steps, config, schedules=annealing(config), **meta)
+            folder, ckpt = open_run(out, ALGO, env_id, seed, steps, config, schedules=annealing(config),
+                                    data_parallel=True, **meta)
         except (ValueError, CheckpointError) as exc:
             error = str(exc)
     ckpt, error = broadcast_object((ckpt, error))
@@ -244,14 +240,15 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
     target = -(-steps // per_update) * per_update
     distributed = {"world_size": world, "backend": dist.get_backend()}
     opened = open_on_rank0(out, env_id, config, steps, seed, {"distributed": distributed, **({"command": command} if command else {})})
-    evaluate = (lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env, config.eval_episodes,
-                                   seed + 10_000)) if eval_env is not None else None
-    run = Run(ALGO, env_id, config, steps, seed, progress=progress and rank == 0, opened=opened, target=target,
-              desc=f"DPPO-{config.objective} {env_id} x{world}", evaluate=evaluate, eval_at_end=True,
-              episode_log=None, logs={"progress": PROGRESS_COLUMNS}, checkpoint_on="iteration",
-              checkpoint_every=config.checkpoint_updates, checkpoint_on_interrupt=False, close=(envs, eval_env))
-    run.track(agent=agent, optimizer=optimizer, obs=running_stats(obs_rms, "obs"), ret=running_stats(ret_rms, "ret"),
-              spaces=spaces, obs_clip=OBS_CLIP, distributed=distributed)
+    evaluate = Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
+                                             config.eval_episodes, seed + 10_000), at_end=True,
+                          keep_best=POLICY_KEYS)
+    run = Run(ALGO, env_id, config, steps, seed, progress=progress and rank == 0, target=target,
+              desc=f"DPPO-{config.objective} {env_id} x{world}", episode_log=None, logs={"progress": PROGRESS_COLUMNS},
+              evaluation=evaluate if eval_env is not None else None, close=(envs, eval_env),
+              workers=Workers(opened, config.checkpoint_updates))
+    run.restores(agent=agent, optimizer=optimizer, obs=running_stats(obs_rms, "obs"), ret=running_stats(ret_rms, "ret"))
+    run.records(spaces=spaces, obs_clip=OBS_CLIP, distributed=distributed)
     step, iteration, kl_coef = run.resume(step=0, iteration=0, kl_coef=config.kl_coef)
     rng, reset_seed = worker_streams(seed, rank, iteration, resumed=opened[1] is not None)
     del opened  # the checkpoint is restored: let it go

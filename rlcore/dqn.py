@@ -32,7 +32,7 @@ from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
 from rlcore.config import NON_NEGATIVE, check_budget, check_config, config_from_dict
 from rlcore.envs import episode_seed, make_env
 from rlcore.evaluate import discounted_return, episode_rewards
-from rlcore.harness import EPISODE_COLUMNS, EVAL_COLUMNS, Run, torch_rng
+from rlcore.harness import EPISODE_COLUMNS, EVAL_COLUMNS, Evaluation, Run, torch_rng
 from rlcore.nets import DuelingQNetwork, QNetwork, soft_update
 from rlcore.schedules import linear_schedule
 
@@ -165,7 +165,6 @@ def evaluate_q(q: torch.nn.Module, env: gym.Env, episodes: int, seed: int, gamma
     starts = np.stack([env.reset(seed=seed + i)[0] for i in range(episodes)])
     with torch.no_grad():
         q_start = q(torch.as_tensor(starts, dtype=torch.float32)).max(dim=1).values.mean().item()
-    q.train()
     returns = np.array([r.sum() for r in rewards])
     return {"mean_return": float(returns.mean()), "std_return": float(returns.std()), "episodes": episodes,
             "q_start": q_start, "discounted_return_start": float(np.mean([discounted_return(r, gamma) for r in rewards]))}
@@ -196,7 +195,7 @@ class GreedyPolicy:
     """The deterministic policy argmax_a Q(s, a), callable on one observation."""
 
     def __init__(self, q: torch.nn.Module):
-        self.q = q.eval()
+        self.q = q
 
     def __call__(self, obs: Any) -> int:
         return greedy_action(self.q, obs)
@@ -271,17 +270,16 @@ def train(
     rng = np.random.default_rng(seed)
     run = Run("dqn", env_id, config, steps, seed, out, progress, desc=f"{config.variant} {env_id}",
               schedules="epsilon schedule" + (" and PER's beta" if config.prioritized else ""),
-              meta={"variant": config.variant}, close=(env, eval_env),
-              evaluate=lambda: evaluate_q(q, eval_env, config.eval_episodes, seed + 10_000, config.gamma),
-              episode_log=EPISODE_COLUMNS + ["epsilon"], eval_log=EVAL_COLUMNS + ["q_start", "discounted_return_start"],
-              defer_interrupts=True)
-    run.track(q=q, q_target=q_target, optimizer=optimizer, replay=buffer if config.replay_in_checkpoint else None,
+              meta={"variant": config.variant}, close=(env, eval_env), episode_log=EPISODE_COLUMNS + ["epsilon"],
+              evaluation=Evaluation(lambda: evaluate_q(q, eval_env, config.eval_episodes, seed + 10_000, config.gamma),
+                                    EVAL_COLUMNS + ["q_start", "discounted_return_start"], keep_best=POLICY_KEYS))
+    run.restores(q=q, q_target=q_target, optimizer=optimizer, replay=buffer if config.replay_in_checkpoint else None,
               rng=rng, torch_rng=torch_rng())
     step, episode = run.resume(step=0, episode=0)
     # [dqn-schedule]
     decay_steps = int(config.exploration_fraction * steps)
     # [/dqn-schedule]
-    obs = run.resume_episode(env, reset_seed=episode_seed(seed, episode), observation=lambda: obs)
+    obs = run.resume_episode(env, reset_seed=episode_seed(seed, episode))
     with run:
         while step < steps:
             # [dqn-act]
@@ -313,7 +311,7 @@ def train(
             if step % config.target_update_interval == 0:
                 soft_update(q_target, q, config.tau)
             # [/dqn-learn]
-            run.step_done(step, step - 1, episode=episode)
+            run.step_done(step, step - 1, obs, episode=episode)
     return Result(q, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns,
                   run.eval_column("q_start"), run.eval_column("discounted_return_start"), step)
 

@@ -5,51 +5,66 @@ its loop, which reads like the algorithm box in its module's docstring. The :cla
 
 - the run folder (``config.json``, ``meta.json``, the CSV logs) and the check that a folder being resumed
   holds the same run (:func:`rlcore.runs.open_run`);
-- what a checkpoint saves and a resume restores: the algorithm registers it once with :meth:`Run.track`
-  (networks, optimizers, replay memories, random generators, normalizer statistics);
-- the progress bar, the per-episode log, periodic evaluation of the deterministic policy, periodic
-  checkpoints, a checkpoint at the end, and one on Ctrl-C or SIGTERM (see :func:`rlcore.runs.stop_on_signals`);
+- what a checkpoint saves and a resume restores, registered once by the algorithm: :meth:`Run.restores` lists
+  what a resume puts back (networks, optimizers, replay memories, random generators, normalizer statistics),
+  :meth:`Run.records` what a checkpoint only says (the spaces a saved policy is rebuilt for);
+- the progress bar, the per-episode log, periodic evaluation of the deterministic policy (:class:`Evaluation`),
+  periodic checkpoints, a checkpoint at the end, and one on Ctrl-C or SIGTERM
+  (see :func:`rlcore.signals.stop_on_signals`), which stop the loop between two steps, not in the middle of one;
 - the episode in progress (:meth:`Run.resume_episode`): a checkpoint taken between two steps holds it, and a run
-  resumed from it goes on with that episode, so that it is the uninterrupted run; with ``defer_interrupts``
-  Ctrl-C and SIGTERM stop the loop between two steps too, not in the middle of one.
+  resumed from it goes on with that episode, so that it is the uninterrupted run.
 
 A loop tells the run where it is with :meth:`Run.record_episode` (an episode ended) and :meth:`Run.step_done`
-(the step counter moved on); the run decides what is due. A typical ``train``::
+(the step counter moved on; here is the observation to act on next); the run decides what is due. A typical
+``train``::
 
-    run = Run("ddpg", env_id, config, steps, seed, out, progress, evaluate=..., close=(env, eval_env))
-    run.track(actor=actor, critic=critic, actor_opt=actor_opt, rng=rng, torch_rng=torch_rng())
+    run = Run("ddpg", env_id, config, steps, seed, out, progress, evaluation=Evaluation(...), close=(env, eval_env))
+    run.restores(actor=actor, critic=critic, actor_opt=actor_opt, rng=rng, torch_rng=torch_rng())
+    run.records(spaces=spaces)
     step, episode = run.resume(step=0, episode=0)
-    obs = run.resume_episode(env, reset_seed=seed, observation=lambda: obs)
+    obs = run.resume_episode(env, reset_seed=seed)
     with run:                      # progress bar; checkpoint at the end, or on Ctrl-C
         while step < steps:
             ...                    # the algorithm
-            run.step_done(step, step - 1, episode=episode)
+            run.step_done(step, step - 1, obs, episode=episode)
     return Result(..., run.episode_returns, run.eval_steps, ...)
 """
 
 from __future__ import annotations
 
-import contextlib
+import math
 import os
 import signal
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
-from rlcore.checkpoint import Saved, load_running_stats, running_stats_state, save_checkpoint  # noqa: F401
+from rlcore.checkpoint import (Saved, load_checkpoint, load_running_stats, running_stats_state,  # noqa: F401
+                               save_checkpoint)
 from rlcore.envs import episode_state, restore_episode
 from rlcore.logger import CSVLogger
 from rlcore.config import config_dict
 from rlcore.runs import RunDir, open_run
+from rlcore.signals import signals_held
 
 EPISODE_COLUMNS = ["episode", "step", "episode_return", "episode_length"]
 """The columns of ``progress.csv`` for an algorithm that logs one row per episode (before its own ones)."""
 EVAL_COLUMNS = ["step", "mean_return", "std_return", "episodes"]
 """The columns of ``eval.csv`` (before an algorithm's own ones)."""
+
+
+def saved_entries(key: str, value: Any) -> dict[str, Any]:
+    """What a checkpoint holds of one restored object (see :meth:`Run.restores`), by checkpoint key."""
+    if isinstance(value, Saved):
+        return value.save()
+    if isinstance(value, np.random.Generator):
+        return {key: value.bit_generator.state}
+    return {key: value.state_dict()}
 
 
 def torch_rng() -> Saved:
@@ -78,48 +93,70 @@ def crossed(every: int, now: int, before: int) -> bool:
     return bool(every) and now // every > before // every
 
 
+@dataclass
+class Evaluation:
+    """How a run evaluates its deterministic policy: ``evaluate()`` returns one row of ``eval.csv`` (without
+    ``step``), with ``columns``; it runs every ``config.eval_every`` steps, and at the end of the run too with
+    ``at_end``."""
+
+    evaluate: Callable[[], dict[str, float]]
+    columns: list[str] = field(default_factory=lambda: list(EVAL_COLUMNS))
+    at_end: bool = False
+    keep_best: tuple[str, ...] = ()
+    """The checkpoint keys of the policy (its algorithm's ``POLICY_KEYS``): the run keeps the best-evaluated policy
+    so far in ``policy_best.pt``, beside the last one in ``checkpoint.pt`` (none where empty)."""
+
+
+@dataclass
+class Workers:
+    """A data-parallel worker's run (DPPO): ``opened`` is the ``(run folder, checkpoint)`` rank 0 opened (None, None
+    on the other ranks); a checkpoint is written every ``checkpoint_every`` iterations, none on an interrupt, and an
+    interrupt stops a worker at once (the workers must stop together)."""
+
+    opened: tuple[RunDir | None, dict[str, Any] | None]
+    checkpoint_every: int
+
+
 class Run:
     """One training run's folder, checkpoints, logs, progress bar and evaluations (see the module docstring).
 
-    ``algo``, ``env_id``, ``config``, ``steps``, ``seed``, ``out`` and ``progress`` are ``train``'s.
-    ``target``: the step count at which the run is complete (default ``steps``; on-policy algorithms round it up
-    to whole iterations). ``schedules``: what the budget shapes, so that a resume must keep it (see
-    :func:`rlcore.runs.open_run`). ``evaluate()`` returns one row of ``eval.csv`` (without ``step``); it runs
-    every ``config.eval_every`` steps, and at the end too with ``eval_at_end``. ``logs``: extra CSV logs, file
-    stem to columns; ``progress`` is the per-episode log, with columns ``episode_log``, unless that is None. ``checkpoint_on``:
-    the counter whose multiples of ``checkpoint_every`` (default ``config.checkpoint_every``) are checkpointed.
-    ``close``: environments to close at the end. ``opened``: an already opened ``(RunDir, checkpoint)``
-    (data-parallel training opens the folder on one worker only). ``meta``: extra fields for ``meta.json``.
-    ``defer_interrupts``: inside ``with run``, a SIGINT or SIGTERM that would interrupt the process stops the
-    loop at the end of its current step (:meth:`step_done`) instead of wherever it is, so that the checkpoint it
-    writes is one between two steps; a second one stops at once and writes no checkpoint (the state may be half a
-    step ahead of the counters; the last checkpoint stays). Data-parallel workers, which must stop together, leave
-    it off. With or without it, a signal that comes while a checkpoint is written waits for the write to end.
+    ``algo``, ``env_id``, ``config``, ``steps``, ``seed``, ``out`` and ``progress`` are ``train``'s; ``desc`` labels
+    the progress bar (default: ``DDPG Hopper-v5``, say). ``target``: the step count at which the run is complete
+    (default ``steps``; on-policy algorithms round it up to whole iterations). ``schedules``: what the budget
+    shapes, so that a resume must keep it (see :func:`rlcore.runs.open_run`); ``meta``: extra fields for
+    ``meta.json``. ``episode_log``: the columns of the per-episode ``progress.csv`` (None: no per-episode log);
+    ``logs``: other CSV logs, file stem to columns. ``evaluation``: how the run evaluates (:class:`Evaluation`; none
+    without it). ``close``: environments to close at the end. ``workers``: a data-parallel worker's run
+    (:class:`Workers`).
+
+    Inside ``with run``, a SIGINT or SIGTERM that would interrupt the process stops the loop at the end of its
+    current step (:meth:`step_done`) instead of wherever it is, so that the checkpoint it writes is one between two
+    steps; a second one stops at once and writes no checkpoint (the state may be half a step ahead of the counters;
+    the last checkpoint stays). A signal that comes while a checkpoint is written waits for the write to end.
     """
 
     def __init__(self, algo: str, env_id: str, config: Any, steps: int, seed: int, out: str | os.PathLike | None = None,
-                 progress: bool = False, *, desc: str, target: int | None = None, schedules: str | None = None,
-                 evaluate: Callable[[], dict[str, float]] | None = None, eval_at_end: bool = False,
-                 episode_log: list[str] | None = EPISODE_COLUMNS, eval_log: list[str] = EVAL_COLUMNS,
-                 logs: dict[str, list[str]] | None = None, checkpoint_on: str = "step",
-                 checkpoint_every: int | None = None, checkpoint_on_interrupt: bool = True, close: tuple = (),
-                 opened: tuple[RunDir | None, dict[str, Any] | None] | None = None, meta: dict[str, Any] | None = None,
-                 defer_interrupts: bool = False):
+                 progress: bool = False, *, desc: str | None = None, target: int | None = None,
+                 schedules: str | None = None,
+                 meta: dict[str, Any] | None = None, episode_log: list[str] | None = EPISODE_COLUMNS,
+                 logs: dict[str, list[str]] | None = None, evaluation: Evaluation | None = None, close: tuple = (),
+                 workers: Workers | None = None):
         self.algo, self.env_id, self.config, self.steps, self.seed = algo, env_id, config, steps, seed
         self.target = steps if target is None else target
-        self.desc, self.progress, self.evaluate, self.eval_at_end = desc, progress, evaluate, eval_at_end
-        self.eval_every = getattr(config, "eval_every", 0) if evaluate is not None else 0
-        self.checkpoint_on = checkpoint_on
-        self.checkpoint_every = config.checkpoint_every if checkpoint_every is None else checkpoint_every
-        self.checkpoint_on_interrupt = checkpoint_on_interrupt
+        self.desc = desc or f"{algo.upper()} {env_id}"
+        self.progress, self.evaluation = progress, evaluation
+        self.eval_every = getattr(config, "eval_every", 0) if evaluation is not None else 0
+        self.workers = workers
+        self.checkpoint_on = "step" if workers is None else "iteration"
+        self.checkpoint_every = config.checkpoint_every if workers is None else workers.checkpoint_every
         self.to_close = close
-        if opened is None:
-            opened = open_run(out, algo, env_id, seed, steps, config, schedules=schedules, **(meta or {}))
+        opened = workers.opened if workers is not None else \
+            open_run(out, algo, env_id, seed, steps, config, schedules=schedules, **(meta or {}))
         self.folder, self.ckpt = opened
         """The checkpoint being resumed, until :meth:`resume` has restored it (then None)."""
         self._resumed: dict[str, Any] | None = None
-        self.tracked: dict[str, Any] = {}
-        self.constants: dict[str, Any] = {}
+        self.restored: dict[str, Any] = {}
+        self.recorded: dict[str, Any] = {}
         self.counters: dict[str, Any] = {}
         self.episode = 0
         """Episodes ended so far, over every resume (the ``episode`` column of the per-episode log)."""
@@ -127,45 +164,52 @@ class Run:
         self.lengths: list[int] = []
         self.end_steps: list[int] = []
         self.evals: list[dict[str, float]] = []
-        self.logs: dict[str, CSVLogger] = {}
+        self.best_return = -math.inf
+        """The best evaluation's mean return so far (the one ``policy_best.pt`` holds)."""
         self._saved_at: dict[str, Any] | None = None
-        self.defer_interrupts = defer_interrupts
-        self._episode: tuple[Any, Callable[[], Any]] | None = None
+        self._episode_env: Any = None
+        self._obs: Any = None
         self._stop_requested = False
         self._stopped_between_steps = False
         self._handlers: dict[int, Any] = {}
         self.bar: tqdm | None = None
-        if self.folder is not None:
-            wanted = {**({"progress": episode_log} if episode_log else {}), **(logs or {})}
-            if evaluate is not None:
-                wanted["eval"] = eval_log
-            self.logs = {name: CSVLogger(self.folder.root / f"{name}.csv", cols) for name, cols in wanted.items()}
         self.episode_log = "progress" if episode_log else None
+        wanted = {**({"progress": episode_log} if episode_log else {}), **(logs or {})}
+        if evaluation is not None:
+            wanted["eval"] = evaluation.columns
+        self.logs = {} if self.folder is None else \
+            {name: CSVLogger(self.folder.root / f"{name}.csv", cols) for name, cols in wanted.items()}
 
     # --- what a checkpoint holds -----------------------------------------------------------------
 
-    def track(self, **state: Any) -> None:
-        """Register what a checkpoint saves, by checkpoint key: modules, optimizers and anything else with
-        ``state_dict``/``load_state_dict``, NumPy generators (their bit generator's state), :class:`Saved`
-        pairs (the key is only a label), and constants (saved, not restored). None is skipped."""
+    def restores(self, **state: Any) -> None:
+        """Register what a checkpoint saves and a resume puts back, by checkpoint key: a module, an optimizer, a
+        replay memory (anything with ``state_dict``/``load_state_dict``), a NumPy generator (its bit generator's
+        state), or a :class:`Saved` pair (the key is only a label). None is skipped (a memory left out of
+        checkpoints)."""
         for key, value in state.items():
             if value is None:
                 continue
-            if hasattr(value, "state_dict") or isinstance(value, (np.random.Generator, Saved)):
-                self.tracked[key] = value
-            else:
-                self.constants[key] = value
+            if not (hasattr(value, "state_dict") or isinstance(value, (np.random.Generator, Saved))):
+                raise TypeError(f"a resume cannot restore {key!r}, a {type(value).__name__}: pass what it only "
+                                "records (the spaces, say) to Run.records")
+            self.restored[key] = value
+
+    def records(self, **facts: Any) -> None:
+        """Register what a checkpoint also holds but a resume does not restore: what a policy loaded from it needs
+        to know (the observation and action spaces, say), by checkpoint key."""
+        self.recorded.update(facts)
 
     def resume(self, **counters: Any) -> Any:
-        """Restore every tracked object from the checkpoint being resumed (if any) and return the counters
-        (``step=0, episode=0``, say) as the checkpoint has them, or as given. A checkpoint that lacks a tracked
-        key (a replay memory) cannot resume the run: ValueError, in one line. Once restored, the loaded checkpoint
+        """Restore everything registered with :meth:`restores` from the checkpoint being resumed (if any) and return
+        the counters (``step=0, episode=0``, say) as the checkpoint has them, or as given. A checkpoint that lacks
+        one (a replay memory) cannot resume the run: ValueError, in one line. Once restored, the loaded checkpoint
         is let go (a resumed run would otherwise hold its replay memory twice); :meth:`resume_episode` keeps
         what it needs."""
         ckpt, self.ckpt = self.ckpt, None
         if ckpt is not None:
             self._check_complete(ckpt)
-            for key, value in self.tracked.items():
+            for key, value in self.restored.items():
                 if isinstance(value, Saved):
                     value.load(ckpt)
                 elif isinstance(value, np.random.Generator):
@@ -176,16 +220,29 @@ class Run:
             self.episode = int(ckpt.get("episode", 0))
             # what resume_episode reads: the episode in progress and the Saved pairs' entries (small), not the
             # networks, optimizers and replay memories just restored
-            restored = {k for k, v in self.tracked.items() if not isinstance(v, Saved)}
+            restored = {k for k, v in self.restored.items() if not isinstance(v, Saved)}
             self._resumed = {k: v for k, v in ckpt.items() if k not in restored}
         self.counters = dict(counters)
+        self.best_return = self._best_so_far()
         values = tuple(counters.values())
         return values[0] if len(values) == 1 else values
 
+    def _best_so_far(self) -> float:
+        """The mean return of the evaluation ``policy_best.pt`` holds, where it is one this run has made by its current
+        step (-inf otherwise: one from past the checkpoint is deleted, its evaluation will be made again)."""
+        path = None if self.folder is None else self.folder.best_policy
+        if path is None or not path.exists():
+            return -math.inf
+        best = load_checkpoint(path)["evaluation"]
+        if best["step"] > self.counters.get("step", 0):
+            path.unlink()
+            return -math.inf
+        return float(best["mean_return"])
+
     def _check_complete(self, ckpt: dict[str, Any]) -> None:
-        """ValueError (one line) if ``ckpt`` lacks a tracked key, or an entry a Saved pair restores."""
-        missing = [k for k, v in self.tracked.items() if not isinstance(v, Saved) and k not in ckpt]
-        for value in self.tracked.values():
+        """ValueError (one line) if ``ckpt`` lacks a restored key, or an entry a Saved pair restores."""
+        missing = [k for k, v in self.restored.items() if not isinstance(v, Saved) and k not in ckpt]
+        for value in self.restored.values():
             if isinstance(value, Saved):
                 missing += [k for k in value.save() if k not in ckpt]
         if missing:
@@ -193,47 +250,56 @@ class Run:
             raise ValueError(f"{where} holds a checkpoint without {', '.join(map(repr, missing))}, which this run "
                              "needs to resume exactly; train it in another --out folder, or delete this one.")
 
-    def resume_episode(self, env: Any, reset_seed: int, observation: Callable[[], Any]) -> Any:
+    def resume_episode(self, env: Any, reset_seed: int) -> Any:
         """The observation the loop acts on first: the checkpoint's episode in progress, put back into ``env``
         (:func:`rlcore.envs.restore_episode`), or where there is none, or it cannot be, a new episode
         (``env.reset(seed=reset_seed)``). From now on a checkpoint taken between two steps holds ``env``'s episode
-        in progress and ``observation()``, the observation the loop is about to act on. What the reset changed
-        in the tracked statistics (a normalizer wrapper counts the first observation) goes back as the checkpoint
-        has it."""
+        in progress and the observation the loop last passed to :meth:`step_done`, the one it is about to act on.
+        What the reset changed in the restored statistics (a normalizer wrapper counts the first observation) goes
+        back as the checkpoint has it."""
         obs, _ = env.reset(seed=reset_seed)
-        self._episode = (env, observation)
+        self._episode_env = env
         resumed, self._resumed = self._resumed, None
         saved = None if resumed is None else resumed.get("episode_env")
         if saved is not None and restore_episode(env, saved):
-            for value in self.tracked.values():
+            for value in self.restored.values():
                 if isinstance(value, Saved):
                     value.load(resumed)
-            return np.asarray(saved["obs"]).copy()
+            obs = np.asarray(saved["obs"]).copy()
+        self._obs = obs
         return obs
 
     def state(self, episode: bool = True) -> dict[str, Any]:
         """The checkpoint's contents now; with ``episode``, the episode in progress too (between two steps only:
         elsewhere the simulator may be a step ahead of the observation)."""
-        state = {"algo": self.algo, "env_id": self.env_id, "seed": self.seed, "config": config_dict(self.config),
-                 "total_steps": self.steps, "complete": self.counters.get("step", 0) >= self.target,
-                 "episode": self.episode, **self.counters, **self.constants}
-        for key, value in self.tracked.items():
-            if isinstance(value, Saved):
-                state.update(value.save())
-            elif isinstance(value, np.random.Generator):
-                state[key] = value.bit_generator.state
-            else:
-                state[key] = value.state_dict()
-        if episode and self._episode is not None:
-            env, observation = self._episode
-            ongoing = episode_state(env)
+        state = {**self.about(), **self.recorded}
+        for key, value in self.restored.items():
+            state.update(saved_entries(key, value))
+        if episode and self._episode_env is not None:
+            ongoing = episode_state(self._episode_env)
             if ongoing is not None:
-                state["episode_env"] = {**ongoing, "obs": np.array(observation())}
+                state["episode_env"] = {**ongoing, "obs": np.array(self._obs)}
+        return state
+
+    def about(self) -> dict[str, Any]:
+        """What every checkpoint says about its run: algorithm, task, seed, settings, budget and counters (the
+        :data:`rlcore.checkpoint.META_KEYS`)."""
+        return {"algo": self.algo, "env_id": self.env_id, "seed": self.seed, "config": config_dict(self.config),
+                "total_steps": self.steps, "complete": self.counters.get("step", 0) >= self.target,
+                "episode": self.episode, **self.counters}
+
+    def policy_state(self, keys: tuple[str, ...]) -> dict[str, Any]:
+        """The entries under ``keys`` that a checkpoint now would hold (a policy's: no optimizer, no memory), with
+        :meth:`about`."""
+        state = {**self.about(), **{k: v for k, v in self.recorded.items() if k in keys}}
+        for key, value in self.restored.items():
+            if key in keys or isinstance(value, Saved):
+                state.update({k: v for k, v in saved_entries(key, value).items() if k in keys})
         return state
 
     def checkpoint(self, episode: bool = True) -> None:
         """Write ``checkpoint.pt`` (atomically) if the run has a folder; ``episode``: see :meth:`state`. A SIGINT or
-        SIGTERM that comes while it is written waits for the write to end (:func:`signals_held`)."""
+        SIGTERM that comes while it is written waits for the write to end (:func:`rlcore.signals.signals_held`)."""
         if self.folder is None:
             return
         with signals_held():
@@ -261,12 +327,15 @@ class Run:
         if name in self.logs:
             self.logs[name].log(**row)
 
-    def step_done(self, step: int, before: int, **counters: Any) -> None:
-        """The loop moved from ``before`` to ``step`` environment steps (and its other counters to ``counters``):
-        evaluate if an evaluation step was passed, checkpoint if a checkpoint step was passed, move the bar."""
+    def step_done(self, step: int, before: int, obs: Any = None, **counters: Any) -> None:
+        """The loop moved from ``before`` to ``step`` environment steps (and its other counters to ``counters``), and
+        acts next on ``obs`` (what a checkpoint of the episode in progress holds): evaluate if an evaluation step was
+        passed, checkpoint if a checkpoint step was passed, move the bar."""
         previous = before if self.checkpoint_on == "step" else self.counters.get(self.checkpoint_on, 0)
         self.counters.update(step=step, **counters)
-        if crossed(self.eval_every, step, before) or (self.eval_at_end and self.eval_every and step >= self.target):
+        self._obs = obs
+        at_end = self.evaluation is not None and self.evaluation.at_end and step >= self.target
+        if crossed(self.eval_every, step, before) or (at_end and self.eval_every):
             self.evaluate_now(step)
         if crossed(self.checkpoint_every, self.counters[self.checkpoint_on], previous):
             self.checkpoint()
@@ -277,23 +346,27 @@ class Run:
             raise KeyboardInterrupt
 
     def evaluate_now(self, step: int) -> dict[str, float]:
-        """Evaluate now: a row of ``eval.csv``; every tracked network (and each of its parts) goes back to the
-        mode, training or evaluation, it was in before (an evaluation may switch the policy to eval())."""
-        modes = [(part, part.training) for value in self.tracked.values() if isinstance(value, torch.nn.Module)
-                 for part in value.modules()]
-        row = {"step": step, **self.evaluate()}
-        for part, training in modes:
-            part.train(training)
+        """Evaluate now: a row of ``eval.csv``."""
+        row = {"step": step, **self.evaluation.evaluate()}
         self.evals.append(row)
         self.log("eval", **row)
+        if self.evaluation.keep_best and self.folder is not None and row["mean_return"] > self.best_return:
+            self.keep_best(row)
         return row
+
+    def keep_best(self, row: dict[str, float]) -> None:
+        """Write the policy just evaluated to ``policy_best.pt`` (atomically), with its evaluation ``row``."""
+        self.best_return = float(row["mean_return"])
+        with signals_held():
+            save_checkpoint(self.folder.best_policy,
+                            {**self.policy_state(self.evaluation.keep_best), "evaluation": dict(row)})
 
     # --- the run's lifetime ----------------------------------------------------------------------
 
     def __enter__(self) -> Run:
         start = min(self.counters.get("step", 0), self.target)
         self.bar = tqdm(total=self.target, initial=start, disable=not self.progress, unit="step", desc=self.desc)
-        if self.defer_interrupts:
+        if self.workers is None:
             self._defer_signals()
         return self
 
@@ -318,14 +391,12 @@ class Run:
 
     def __exit__(self, kind: type | None, exc: BaseException | None, tb: Any) -> None:
         try:
-            between_steps = kind is None or self._stopped_between_steps
-            if kind is None or (kind is KeyboardInterrupt and self.checkpoint_on_interrupt):
-                if self._saved_at != self.counters and (between_steps or not self.defer_interrupts):
-                    # an interrupt in the middle of a step leaves the simulator ahead of the loop's observation:
-                    # such a checkpoint holds no episode, and a resumed run starts a new one. Where a run stops
-                    # between steps (defer_interrupts), a second Ctrl-C in the middle of one writes nothing: the
-                    # networks and memories may be half a step ahead of the counters, and the last checkpoint stays
-                    self.checkpoint(episode=between_steps)
+            # at the end, or stopped between two steps: a checkpoint, unless the last one is of this step. A second
+            # Ctrl-C in the middle of a step writes nothing: the networks and memories may be half a step ahead of
+            # the counters, and the last checkpoint stays (so do a data-parallel worker's, stopped anywhere)
+            between_steps = kind is None or (self._stopped_between_steps and self.workers is None)
+            if between_steps and self._saved_at != self.counters:
+                self.checkpoint()
         finally:
             for sig, handler in self._handlers.items():
                 signal.signal(sig, handler)
@@ -364,28 +435,6 @@ class Run:
 
     def eval_column(self, name: str) -> np.ndarray:
         return np.array([row[name] for row in self.evals])
-
-
-@contextlib.contextmanager
-def signals_held() -> Iterator[None]:
-    """Inside, a SIGINT or SIGTERM whose handler is Python's (one that would interrupt) is held back: when the block
-    ends, that handler runs as if the signal had just come (a KeyboardInterrupt, a stop request), so that what the
-    block writes is written whole. Only the main thread can hold signals; elsewhere nothing changes."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    held: list[int] = []
-    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    handlers = {sig: h for sig, h in handlers.items() if callable(h)}
-    for sig in handlers:
-        signal.signal(sig, lambda signum, frame: held.append(signum))
-    try:
-        yield
-    finally:
-        for sig, handler in handlers.items():
-            signal.signal(sig, handler)
-    for signum in held:  # the block ended normally: the signals it held back take effect now, in order
-        handlers[signum](signum, None)
 
 
 def evaluation(policy: Any, env: Any, episodes: int, seed: int) -> dict[str, float]:

@@ -4,6 +4,9 @@ of a process and the rank torchrun gave a worker (read from Linux's ``/proc``).
     cmd = torchrun_command(2, "HalfCheetah-v5", 1_000_000, seed=0, out="runs/dppo-hc", restarts=3)
     job = subprocess.Popen(cmd)
     rank1 = [pid for pid in child_pids(job.pid) if worker_rank(pid) == 1]
+    # two machines, one worker each: the same command on both (HOST0 is one of them)
+    cmd = torchrun_command(1, "HalfCheetah-v5", 1_000_000, seed=0, out="runs/dppo-hc", nodes=2,
+                           rendezvous="HOST0:29400")
 """
 
 from __future__ import annotations
@@ -21,19 +24,29 @@ TORCHRUN = [sys.executable, "-m", "torch.distributed.run"]
 
 def torchrun_command(workers: int, env_id: str, steps: int, seed: int, out: str | os.PathLike,
                      overrides: dict[str, Any] | None = None, restarts: int = 0, extra: list[str] | tuple = (),
-                     progress: bool = False) -> list[str]:
+                     progress: bool = False, nodes: int = 1, rendezvous: str | None = None,
+                     job_id: str = "rlcore-dppo") -> list[str]:
     """The command that trains DPPO on ``env_id`` with ``workers`` worker processes on this machine.
 
     ``--standalone`` lets torchrun pick a free port, so that several jobs can run side by side; ``restarts`` is
     torchrun's ``--max-restarts`` (start all workers again, up to that many times, when one dies); ``overrides``
     are Config fields (``--set``); ``extra`` is appended (``--dump-params DIR``, say). ``TORCHRUN`` is the first
     three items: print ``["torchrun", *cmd[3:]]`` to show it as one would type it.
+
+    Several machines: ``nodes`` > 1 and ``rendezvous``, the ``HOST:PORT`` of one of them, replace
+    ``--standalone`` by torchrun's multi-node rendezvous (``--nnodes``, ``--rdzv-backend c10d``,
+    ``--rdzv-endpoint``, ``--rdzv-id job_id``). The same command is run on every machine; ``workers`` is then
+    the workers of each one, and the job waits until all ``nodes`` have joined.
     """
     from rlcore.cli import set_args
 
-    if workers < 1 or restarts < 0:
-        raise ValueError(f"need workers >= 1 and restarts >= 0, got {workers} and {restarts}")
-    return [*TORCHRUN, "--standalone", f"--nproc_per_node={workers}", f"--max-restarts={restarts}",
+    if workers < 1 or restarts < 0 or nodes < 1:
+        raise ValueError(f"need workers >= 1, restarts >= 0 and nodes >= 1, got {workers}, {restarts} and {nodes}")
+    if nodes > 1 and not rendezvous:
+        raise ValueError(f"{nodes} nodes need a rendezvous endpoint, HOST:PORT of one of them (rendezvous=...)")
+    where = (["--standalone"] if nodes == 1 else
+             [f"--nnodes={nodes}", "--rdzv-backend=c10d", f"--rdzv-endpoint={rendezvous}", f"--rdzv-id={job_id}"])
+    return [*TORCHRUN, *where, f"--nproc_per_node={workers}", f"--max-restarts={restarts}",
             "-m", "rlcore.dppo", "--env", env_id, "--steps", str(steps), "--seed", str(seed), "--out", str(out),
             *([] if progress else ["--no-progress"]), *set_args(overrides or {}), *extra]
 

@@ -95,7 +95,7 @@ def action_distance(actor_a: torch.nn.Module, actor_b: torch.nn.Module, obs: tor
 
 # [param-noise]
 class AdaptiveParamNoise:
-    """A perturbed copy of the actor, theta~ = theta + N(0, sigma^2), with sigma adapted to a target distance.
+    """A perturbed copy of the actor, w~ = w + N(0, sigma^2) on its weights w, with sigma adapted to a target distance.
 
     At each episode's end: :meth:`adapt_to` perturbs a separate copy of the current actor with the current sigma,
     measures d = distance(mu(s), mu~(s)) on a minibatch of states, and moves sigma (``adapt``: sigma <- sigma / alpha
@@ -115,7 +115,7 @@ class AdaptiveParamNoise:
         return self.perturbed
 
     def perturbed_copy(self, actor: torch.nn.Module) -> torch.nn.Module:
-        """theta + N(0, sigma^2 I): a perturbed copy of ``actor`` (the behaviour policy is left as it is)."""
+        """w + N(0, sigma^2 I) on the weights w of a copy of ``actor`` (the behaviour policy is left as it is)."""
         copy_ = copy.deepcopy(actor)
         with torch.no_grad():
             for p in copy_.parameters():

@@ -7,15 +7,16 @@
   :class:`TwinCritic` (Q_1 and Q_2 as one module: each layer of both in one batched matrix product);
 - :class:`Observations`: raw observations, or scaled by running statistics (``normalize_obs``);
   :class:`DeterministicPolicy`: the policy a run saves;
-- :class:`Minibatch` and :func:`frozen`; :class:`OffPolicyLoop`: the loop every off-policy ``train`` runs (act,
-  store, reset at an episode's end, learn from a minibatch), with the plumbing in the harness's :class:`Run`.
+- :class:`Minibatch`; :func:`gradient_step`, one optimizer step on a loss; :func:`frozen`;
+- :class:`OffPolicyLoop`: the loop every off-policy ``train`` runs (act, store, reset at an episode's end, learn from
+  a minibatch), with the plumbing in the harness's :class:`Run`.
 
 An algorithm module keeps what is its own: its networks' losses and updates, how it explores, and what it learns
 from one minibatch. Its ``train`` reads like its algorithm box::
 
-    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
+    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
-    loop.run(steps, act=..., learn=...)
+    loop.run_until(steps, act, learn, critic, targets)
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from torch import nn
 from rlcore.buffers import ReplayBuffer
 from rlcore.config import config_from_dict
 from rlcore.envs import ObservationScaler, episode_seed, make_env, normalize_observation
-from rlcore.harness import Run, running_stats
+from rlcore.harness import Evaluation, Run, evaluation, running_stats
 from rlcore.nets import mlp
 
 
@@ -223,6 +224,15 @@ def min_q(q: torch.Tensor) -> torch.Tensor:
     return q.min(dim=0).values if q.dim() == 2 else q
 
 
+def gradient_step(optimizer: torch.optim.Optimizer, loss: torch.Tensor) -> float:
+    """One step of ``optimizer`` down the gradient of ``loss``: clear the old gradients, backpropagate, step.
+    Returns the loss, as a float."""
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    optimizer.step()
+    return float(loss.detach())
+
+
 @contextlib.contextmanager
 def frozen(module: nn.Module) -> Iterator[None]:
     """Inside, ``module``'s parameters get no gradient: an actor's loss flows through the critic into the actor only
@@ -269,7 +279,7 @@ class DeterministicPolicy:
     observation scaled by training's statistics (normalize_obs)."""
 
     def __init__(self, actor: nn.Module, obs_mean=None, obs_var=None):
-        self.actor = actor.eval()
+        self.actor = actor
         self.obs_mean = None if obs_mean is None else np.asarray(obs_mean)
         self.obs_var = None if obs_var is None else np.asarray(obs_var)
 
@@ -277,6 +287,18 @@ class DeterministicPolicy:
         x = obs if self.obs_mean is None else normalize_observation(obs, self.obs_mean, self.obs_var)
         with torch.no_grad():
             return self.actor(torch.as_tensor(x, dtype=torch.float32).unsqueeze(0))[0].numpy()
+
+
+POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
+"""Checkpoint keys the deterministic policy of DDPG, TD3 or SAC is rebuilt from (:func:`saved_actor`)."""
+
+
+def policy_evaluation(policy: Callable[[], DeterministicPolicy], eval_env: gym.Env, config: OffPolicyConfig,
+                      seed: int) -> Evaluation:
+    """The run's evaluation: ``policy()``, the deterministic policy now, on ``config.eval_episodes`` episodes of
+    ``eval_env`` (reset seeds from ``seed + 10_000``); the best-evaluated one is kept (``policy_best.pt``)."""
+    return Evaluation(lambda: evaluation(policy(), eval_env, config.eval_episodes, seed + 10_000),
+                      keep_best=POLICY_KEYS)
 
 
 def saved_actor(ckpt: dict[str, Any], config_cls: type, actor_cls: type) -> nn.Module:
@@ -312,38 +334,54 @@ class Minibatch:
         return self.obs, self.actions, self.rewards, self.next_obs, self.terminated
 
 
-Probe = Callable[[int, Minibatch, nn.Module, Callable[[], torch.Tensor], float], None]
-"""A diagnostic called before every learning step: ``probe(step, minibatch, critic, target, gamma)``, where
-``target()`` computes that step's critic targets y. It must only read, so that the run it watches
-is the run without it (the book's critic trace is one)."""
+@dataclass
+class Update:
+    """What one learning step of DDPG, TD3 or SAC is about to do, as an :data:`UpdateHook` sees it: the environment
+    step, the minibatch, the critic the step updates, and ``targets()``, which computes the step's critic targets y
+    as the algorithm does."""
+
+    step: int
+    minibatch: Minibatch
+    critic: nn.Module
+    targets: Callable[[], torch.Tensor]
+
+
+UpdateHook = Callable[[Update], None]
+"""Called before every learning step of the off-policy loop with the :class:`Update` to come. It is for diagnostics
+and must only read, so that the run it watches is the run without it (the book's critic trace is one: it computes
+``targets()`` with torch's random generator forked, since TD3's and SAC's targets draw from it)."""
 
 
 class OffPolicyLoop:
     """The loop of DDPG, TD3 and SAC: act (uniformly at random before ``learning_starts``), store the transition,
     start a new episode at an episode's end, learn from one minibatch per step; the :class:`Run` evaluates,
-    checkpoints and shows progress. ``rng`` draws the random actions; the run must track it."""
+    checkpoints and shows progress. ``rng`` draws the random actions; the run must restore it. ``on_update``: a
+    read-only hook called before every learning step (:data:`UpdateHook`)."""
 
     def __init__(self, run: Run, env: gym.Env, buffer: ReplayBuffer, observations: Observations,
-                 config: OffPolicyConfig, seed: int, rng: np.random.Generator, box: ActionBox):
+                 config: OffPolicyConfig, seed: int, rng: np.random.Generator, box: ActionBox,
+                 on_update: UpdateHook | None = None):
         self.run, self.env, self.buffer, self.observations = run, env, buffer, observations
         self.config, self.seed, self.rng, self.box = config, seed, rng, box
+        self.on_update = on_update
         self.step = self.episode = 0
         self.obs: np.ndarray | None = None
 
     def resume(self) -> int:
-        """Restore what the run tracks from its checkpoint (if any), and the episode in progress; the step to go
+        """Restore what the run restores from its checkpoint (if any), and the episode in progress; the step to go
         on from."""
         self.step, self.episode = self.run.resume(step=0, episode=0)
-        self.obs = self.run.resume_episode(self.env, reset_seed=episode_seed(self.seed, self.episode),
-                                           observation=lambda: self.obs)
+        self.obs = self.run.resume_episode(self.env, reset_seed=episode_seed(self.seed, self.episode))
         return self.step
 
     def run_until(self, steps: int, act: Callable[[np.ndarray], np.ndarray], learn: Callable[[int, Minibatch], None],
+                  critic: nn.Module, targets: Callable[[Minibatch], torch.Tensor],
                   episode_columns: Callable[[], dict[str, Any]] = dict,
                   episode_ended: Callable[[], None] | None = None) -> int:
         """Train until ``steps`` environment steps. ``act(obs)``: the behaviour action for a raw observation, in the
-        box. ``learn(step, minibatch)``: one learning step. ``episode_columns()``: extra columns of the episode log,
-        read as an episode ends; ``episode_ended()``: called after the next episode's reset."""
+        box. ``learn(step, minibatch)``: one learning step, which updates ``critic`` toward ``targets(minibatch)``
+        (what an ``on_update`` hook is shown). ``episode_columns()``: extra columns of the episode log, read as an
+        episode ends; ``episode_ended()``: called after the next episode's reset."""
         run, env, config = self.run, self.env, self.config
         with run:
             while self.step < steps:
@@ -363,9 +401,12 @@ class OffPolicyLoop:
                     if episode_ended is not None:
                         episode_ended()
                 if self.step >= config.learning_starts:
-                    learn(self.step, Minibatch.sample(self.buffer, config.batch_size, self.observations))
+                    mb = Minibatch.sample(self.buffer, config.batch_size, self.observations)
+                    if self.on_update is not None:
+                        self.on_update(Update(self.step, mb, critic, lambda: targets(mb)))
+                    learn(self.step, mb)
                 # [/offpolicy-loop]
-                run.step_done(self.step, self.step - 1, episode=self.episode)
+                run.step_done(self.step, self.step - 1, self.obs, episode=self.episode)
         return self.step
 
 

@@ -12,11 +12,12 @@
   :func:`deterministic_policy`: what every on-policy ``train`` does around its loop;
 - :func:`saved_policy`: the deterministic policy a checkpoint holds (what every ``load_policy`` here returns).
 
-A Config here is any of :mod:`rlcore.a2c`'s or :mod:`rlcore.ppo`'s: the functions read the fields they share.
+- :class:`OnPolicyConfig`: the fields the three share, which the functions here read.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -24,11 +25,65 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.config import config_from_dict
+from rlcore.config import check_config, config_from_dict
 from rlcore.envs import find_wrapper, make_vec_env, normalize_observation
 from rlcore.nets import mlp
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
+
+
+@dataclass
+class OnPolicyConfig:
+    """What A2C, PPO and DPPO share: the vectorized environments and their normalization, the discount and GAE, the
+    optimizer's step size and the loss's weights, the actor-critic's shape, evaluation and checkpoints. The defaults
+    are A2C's (Stable-Baselines3's, RL Zoo's CartPole-v1 settings); :class:`rlcore.ppo.Config` sets the PPO paper's
+    where they differ."""
+
+    num_envs: int = 8
+    """Environments stepped in parallel (a Gymnasium vector environment); A3C's parallel actors."""
+    n_steps: int = 5
+    """Steps per environment per iteration: returns look at most this far ahead (A3C's t_max)."""
+    gamma: float = 0.99
+    """Discount factor."""
+    gae_lambda: float = 1.0
+    """GAE's lambda; 1.0 gives plain n-step returns minus V (A3C), smaller values trade variance for bias."""
+    learning_rate: float = 7e-4
+    """Step size (one optimizer for actor and critic)."""
+    anneal_lr: bool = False
+    """Decay the step size linearly to 0 over the run."""
+    ent_coef: float = 0.0
+    """Entropy bonus weight (A3C used 0.01 on Atari)."""
+    vf_coef: float = 0.5
+    """Value-loss weight."""
+    max_grad_norm: float = 0.5
+    """Clip the gradient's global norm to this."""
+    normalize_advantage: bool = False
+    """Standardize the advantages of each rollout (off in A3C and SB3's A2C)."""
+    normalize_obs: bool = False
+    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
+    normalize_reward: bool = False
+    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
+    hidden: tuple[int, ...] = (64, 64)
+    """Hidden layers of the actor and of the critic (separate networks) [the PPO report's hidden-size]."""
+    activation: str = "tanh"
+    """Hidden-layer nonlinearity: ``"tanh"`` (A3C, the PPO paper) or ``"relu"`` (RL-Zoo's tuned MuJoCo settings)."""
+    ortho_init: bool = True
+    """Orthogonal initialization with a small last policy layer; False keeps PyTorch's default init."""
+    log_std_init: float = 0.0
+    """Initial log standard deviation of the Gaussian policy (continuous actions)."""
+    eval_every: int = 10_000
+    """Evaluate the deterministic policy after the first iteration past every this many steps (0: never)."""
+    eval_episodes: int = 5
+    """Episodes per evaluation."""
+    checkpoint_every: int = 50_000
+    """Write checkpoint.pt after the first iteration past every this many steps (and at the end, and on Ctrl-C)."""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments for ``gymnasium.make``."""
+
+    def __post_init__(self) -> None:
+        check_config(self)
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
 
 
 def normalize(x: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
@@ -98,7 +153,7 @@ class ActorCriticPolicy:
     """The deterministic policy (Gaussian mean, or most likely action) with training's observation scaling."""
 
     def __init__(self, agent: ActorCritic, obs_mean=None, obs_var=None, obs_clip: float = 10.0, low=None, high=None):
-        self.agent = agent.eval()
+        self.agent = agent
         self.obs_mean = None if obs_mean is None else np.asarray(obs_mean)
         self.obs_var = None if obs_var is None else np.asarray(obs_var)
         self.obs_clip = obs_clip

@@ -2,19 +2,13 @@
 
 One implementation, two objectives (``Config.objective``):
 
-- ``"clip"``: L = E[ min(r_t A_t, clip(r_t, 1 - eps, 1 + eps) A_t) ]
-- ``"kl"``:   L = E[ r_t A_t ] - beta * KL[pi_old || pi],  beta adapted after every update
+- ``"clip"``: L = E[ min(rho_t A_t, clip(rho_t, 1 - eps, 1 + eps) A_t) ]
+- ``"kl"``:   L = E[ rho_t A_t ] - beta * KL[pi_old || pi],  beta adapted after every update
   (the course report's rule: beta <- alpha * beta if KL > beta_high * KL_target,
   beta <- beta / alpha if KL < beta_low * KL_target)
 
-The KL the rule reads is not the PPO paper's d. Schulman et al. (2017, section 4) compute d = E[KL[pi_old, pi]]
-after all of the iteration's epochs of updates. rlcore reads the mean, over the last epoch's minibatches, of the
-KL each minibatch measured on its own samples just *before* its own gradient step (:func:`ppo_update`): the last
-step's move is never measured, and the value lags the paper's d. With one minibatch per epoch (the report's Hopper
-runs: 128 samples, 20 epochs) it is the KL after 19 of the 20 steps; with one epoch of one minibatch it is always
-0 and beta shrinks by alpha every iteration. Stored runs (``results/ppo-report-hopper/kl``) were trained with this rule.
-
-with r_t = pi(a_t | s_t) / pi_old(a_t | s_t). The loop (Schulman et al. 2017, Algorithm 1):
+with the probability ratio rho_t = pi(a_t | s_t) / pi_old(a_t | s_t) (the PPO paper's r_t; r_t is the reward here).
+The loop (Schulman et al. 2017, Algorithm 1):
 
     for each iteration:
         run the policy in num_envs environments for n_steps steps
@@ -23,13 +17,20 @@ with r_t = pi(a_t | s_t) / pi_old(a_t | s_t). The loop (Schulman et al. 2017, Al
             maximize the surrogate objective, minimize the value loss
         (kl) adapt beta from the last epoch's KL, measured before each minibatch step (not after them all)
 
+The KL the rule reads is not the PPO paper's d. Schulman et al. (2017, section 4) compute d = E[KL[pi_old, pi]]
+after all of the iteration's epochs of updates. rlcore reads the mean, over the last epoch's minibatches, of the
+KL each minibatch measured on its own samples just *before* its own gradient step (:func:`ppo_update`): the last
+step's move is never measured, and the value lags the paper's d. With one minibatch per epoch (the report's Hopper
+runs: 128 samples, 20 epochs) it is the KL after 19 of the 20 steps; with one epoch of one minibatch it is always
+0 and beta shrinks by alpha every iteration. Stored runs (``results/ppo-report-hopper/kl``) were trained with this rule.
+
 Observations and rewards are normalized with Gymnasium's vector wrappers; the observation statistics
 travel with the policy, so evaluation sees observations exactly as training did.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,15 +39,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.checkpoint import load_checkpoint
-from rlcore.config import check_budget, check_config
+from rlcore.config import check_budget
 from rlcore.envs import make_env, pending_resets
-from rlcore.harness import Run, evaluation, running_stats, torch_rng
-from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, Rollout, annealing,  # noqa: F401
-                             collect_rollout, deterministic_policy, gae, make_agent, make_envs, normalize,
-                             saved_policy, set_learning_rate, training_statistics, valid_batch)
+from rlcore.harness import Evaluation, Run, evaluation, running_stats, torch_rng
+from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, OnPolicyConfig,  # noqa: F401
+                             Rollout, annealing, collect_rollout, deterministic_policy, gae, make_agent, make_envs,
+                             normalize, saved_policy, set_learning_rate, training_statistics, valid_batch)
 from rlcore.onpolicy import check_spaces as _check_spaces
-from rlcore.runs import RunDir
 
 POLICY_KEYS = ("agent", "obs_mean", "obs_var", "obs_clip", "spaces")
 """Checkpoint keys :func:`load_policy` needs."""
@@ -55,28 +54,34 @@ OBJECTIVES = ("clip", "kl")
 
 
 @dataclass
-class Config:
-    """Hyperparameters of PPO (defaults: the PPO paper's MuJoCo settings; report names in brackets)."""
+class Config(OnPolicyConfig):
+    """Hyperparameters of PPO (defaults: the PPO paper's MuJoCo settings; report names in brackets). The fields PPO
+    shares with A2C and DPPO are :class:`rlcore.onpolicy.OnPolicyConfig`'s; those whose defaults differ from A2C's
+    are set again here."""
 
-    objective: str = "clip"
-    """``"clip"`` (clipped surrogate) or ``"kl"`` (adaptive KL penalty) [method-index clip(1)/KL(0)]."""
     num_envs: int = 1
     """Environments stepped in parallel (a Gymnasium vector environment)."""
     n_steps: int = 2048
     """Steps per environment per iteration; a rollout holds n_steps * num_envs transitions [memory-batch]."""
-    batch_size: int = 64
-    """Minibatch size for the gradient steps."""
-    n_epochs: int = 10
-    """Passes over each rollout [action-update-steps, critic-update-steps]."""
+    gae_lambda: float = 0.95
+    """GAE's lambda: 0 is the one-step TD error, 1 the Monte-Carlo return minus V (the report's algorithm box uses
+    Monte-Carlo advantages, 1; its ``lam`` is the KL coefficient below)."""
     learning_rate: float = 3e-4
     """Adam step size (one optimizer for actor and critic)."""
     anneal_lr: bool = True
     """Decay the step size linearly to 0 over the run."""
-    gamma: float = 0.99
-    """Discount factor."""
-    gae_lambda: float = 0.95
-    """GAE's lambda: 0 is the one-step TD error, 1 the Monte-Carlo return minus V (the report's algorithm box uses
-    Monte-Carlo advantages, 1; its ``lam`` is the KL coefficient below)."""
+    normalize_advantage: bool = True
+    """Standardize advantages per minibatch (the report's 'advantage value normalization')."""
+    normalize_obs: bool = True
+    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
+    normalize_reward: bool = True
+    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
+    objective: str = "clip"
+    """``"clip"`` (clipped surrogate) or ``"kl"`` (adaptive KL penalty) [method-index clip(1)/KL(0)]."""
+    batch_size: int = 64
+    """Minibatch size for the gradient steps."""
+    n_epochs: int = 10
+    """Passes over each rollout [action-update-steps, critic-update-steps]."""
     clip_range: float = 0.2
     """The clipped objective's epsilon [epsilon]."""
     kl_target: float = 0.01
@@ -89,45 +94,15 @@ class Config:
     """beta grows when KL > kl_beta_high * kl_target [beta-high]."""
     kl_alpha: float = 2.0
     """Factor by which beta grows or shrinks [alpha]."""
-    normalize_advantage: bool = True
-    """Standardize advantages per minibatch (the report's 'advantage value normalization')."""
-    normalize_obs: bool = True
-    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
-    normalize_reward: bool = True
-    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
-    ent_coef: float = 0.0
-    """Entropy bonus weight."""
-    vf_coef: float = 0.5
-    """Value-loss weight."""
-    max_grad_norm: float = 0.5
-    """Clip the gradient's global norm to this."""
-    hidden: tuple[int, ...] = (64, 64)
-    """Hidden layers of the actor and of the critic (separate networks) [hidden-size]."""
-    activation: str = "tanh"
-    """Hidden-layer nonlinearity: ``"tanh"`` (the PPO paper) or ``"relu"`` (RL-Zoo's tuned MuJoCo settings)."""
-    ortho_init: bool = True
-    """Orthogonal initialization with a small last policy layer; False keeps PyTorch's default init."""
-    log_std_init: float = 0.0
-    """Initial log standard deviation of the Gaussian policy (continuous actions)."""
     explore_noise: float = 0.0
     """Extra Gaussian noise added to the policy's sampled actions, its standard deviation in action units (0: none)
     [use-explore]. The noisy action is what is stored and learned from, as in the report; the policy then no
     longer samples its own data exactly, so PPO's ratio is only approximately right."""
     explore_decay: float = 1.0
     """The extra noise's standard deviation is ``explore_noise * explore_decay ** step`` [explore-decay]."""
-    eval_every: int = 10_000
-    """Evaluate the deterministic policy after the first iteration past every this many steps (0: never)."""
-    eval_episodes: int = 5
-    """Episodes per evaluation."""
-    checkpoint_every: int = 50_000
-    """Write checkpoint.pt after the first iteration past every this many steps (and at the end, and on Ctrl-C)."""
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    """Keyword arguments for ``gymnasium.make``."""
 
     def __post_init__(self) -> None:
-        check_config(self)
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
+        super().__post_init__()
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
         if self.batch_size > self.n_steps * self.num_envs:
@@ -140,14 +115,14 @@ class Config:
 
 
 def clipped_surrogate(ratio: torch.Tensor, advantages: torch.Tensor, clip_range: float) -> torch.Tensor:
-    """-E[min(r A, clip(r, 1-eps, 1+eps) A)]: the clipped objective, negated to be minimized."""
+    """-E[min(rho A, clip(rho, 1-eps, 1+eps) A)], rho the probability ratio: the clipped objective, negated."""
     unclipped = ratio * advantages
     clipped = torch.clamp(ratio, 1.0 - clip_range, 1.0 + clip_range) * advantages
     return -torch.min(unclipped, clipped).mean()
 
 
 def kl_penalty_surrogate(ratio: torch.Tensor, advantages: torch.Tensor, kl: torch.Tensor, beta: float) -> torch.Tensor:
-    """-(E[r A] - beta * KL[pi_old || pi]): the KL-penalized objective, negated to be minimized."""
+    """-(E[rho A] - beta * KL[pi_old || pi]): the KL-penalized objective, negated to be minimized."""
     return -(ratio * advantages).mean() + beta * kl
 
 
@@ -241,14 +216,6 @@ def check_spaces(envs: gym.Env | gym.vector.VectorEnv, env_id: str) -> dict[str,
     return _check_spaces(envs, env_id, "PPO")
 
 
-def refuse_distributed(out: str | Path | None) -> None:
-    """A data-parallel run's folder is resumed by :mod:`rlcore.dppo`, not here."""
-    prior = RunDir(out).checkpoint if out is not None else None
-    if prior is not None and prior.exists() and load_checkpoint(prior).get("distributed"):
-        raise ValueError(f"{out} holds a data-parallel PPO run; resume it with `torchrun --nproc_per_node N -m "
-                         "rlcore.dppo ...` (see rlcore.dppo), or choose another --out folder.")
-
-
 def train(
     env_id: str,
     config: Config | None = None,
@@ -273,21 +240,22 @@ def train(
     eval_env = make_env(env_id, **config.env_kwargs)
     per_iter = config.n_steps * config.num_envs
     iterations = -(-steps // per_iter)
-    refuse_distributed(out)
     run = Run("ppo", env_id, config, steps, seed, out, progress, desc=f"PPO-{config.objective} {env_id}",
-              target=iterations * per_iter, schedules=annealing(config), eval_at_end=True, close=(envs, eval_env),
-              evaluate=lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
-                                          config.eval_episodes, seed + 10_000),
-              logs={"updates": UPDATE_COLUMNS}, defer_interrupts=True)
-    run.track(agent=agent, optimizer=optimizer, rng=rng, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
-              ret=running_stats(ret_rms, "ret"), spaces=spaces, obs_clip=OBS_CLIP)
+              target=iterations * per_iter, schedules=annealing(config), close=(envs, eval_env),
+              logs={"updates": UPDATE_COLUMNS},
+              evaluation=Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
+                                                       config.eval_episodes, seed + 10_000), at_end=True,
+                                    keep_best=POLICY_KEYS))
+    run.restores(agent=agent, optimizer=optimizer, rng=rng, torch_rng=torch_rng(), obs=running_stats(obs_rms, "obs"),
+                 ret=running_stats(ret_rms, "ret"))
+    run.records(spaces=spaces, obs_clip=OBS_CLIP)
     step, iteration, kl_coef = run.resume(step=0, iteration=0, kl_coef=config.kl_coef)
     buf = Rollout(spaces, config.n_steps, config.num_envs)
 
     def on_episode(t: int, episode_return: float, length: int) -> None:  # an episode ended at rollout step t
         run.record_episode(step + (t + 1) * config.num_envs, episode_return, length)
 
-    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration, observation=lambda: obs)
+    obs = run.resume_episode(envs, reset_seed=seed + 1_000 * iteration)
     buf.ended = pending_resets(envs)  # the copies whose episode ended on the step before the checkpoint
     with run:
         while iteration < iterations:
@@ -306,7 +274,7 @@ def train(
             m = np.mean(stats, axis=0)
             run.log("updates", iteration=iteration, step=step, policy_loss=m[0], value_loss=m[1], entropy=m[2],
                     approx_kl=mean_kl, clip_fraction=m[4], kl_coef=kl_coef, learning_rate=lr)
-            run.step_done(step, step - per_iter, iteration=iteration, kl_coef=kl_coef)
+            run.step_done(step, step - per_iter, obs, iteration=iteration, kl_coef=kl_coef)
     return Result(agent, deterministic_policy(agent, spaces, obs_rms), run.episode_returns, run.episode_end_steps,
                   run.eval_steps, run.eval_returns, step)
 

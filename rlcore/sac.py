@@ -38,14 +38,13 @@ import torch.nn.functional as F
 from torch import nn
 
 from rlcore.config import POSITIVE, check_budget, check_config
-from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
+from rlcore.harness import Run, torch_rng
 from rlcore.nets import mlp, soft_update
-from rlcore.offpolicy import saved_actor
+from rlcore.offpolicy import POLICY_KEYS, policy_evaluation, saved_actor  # noqa: F401 (POLICY_KEYS: load_policy's)
 from rlcore.offpolicy import (ActionBox, DeterministicPolicy, Minibatch, Observations, OffPolicyConfig,
-                              OffPolicyLoop, TwinCritic, box_buffers, frozen, make_envs, make_replay, min_q)
+                              OffPolicyLoop, TwinCritic, UpdateHook, box_buffers, frozen, gradient_step, make_envs,
+                              make_replay, min_q)
 
-POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
-"""Checkpoint keys :func:`load_policy` needs."""
 
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0
 """The policy's log standard deviation is clamped to this range (as in Spinning Up and Stable-Baselines3)."""
@@ -197,8 +196,9 @@ def saved_policy(actor: SquashedGaussianActor, observations: Observations) -> De
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
-          out: str | Path | None = None, progress: bool = False) -> Result:
-    """Train SAC for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint)."""
+          out: str | Path | None = None, progress: bool = False, on_update: UpdateHook | None = None) -> Result:
+    """Train SAC for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint). ``on_update``: a
+    read-only diagnostic called before every learning step (:data:`rlcore.offpolicy.UpdateHook`)."""
     check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
@@ -216,14 +216,14 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     observations = Observations(sp["obs_dim"], config.normalize_obs)
     entropy = [float("nan")]  # -log pi on the latest minibatch, for the temperature log
 
-    run = Run("sac", env_id, config, steps, seed, out, progress, desc=f"SAC {env_id}", close=(env, eval_env),
-              evaluate=lambda: evaluation(saved_policy(actor, observations), eval_env, config.eval_episodes,
-                                          seed + 10_000),
-              episode_log=EPISODE_COLUMNS, logs={"alpha": ["step", "alpha", "entropy"]}, defer_interrupts=True)
-    run.track(actor=actor, critic=critic, critic_target=critic_t, temperature=temperature, actor_opt=actor_opt,
-              critic_opt=critic_opt, alpha_opt=alpha_opt, replay=buffer if config.replay_in_checkpoint else None,
-              rng=rng, torch_rng=torch_rng(), spaces=sp, obs=observations.saved())
-    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
+    run = Run("sac", env_id, config, steps, seed, out, progress, close=(env, eval_env),
+              logs={"alpha": ["step", "alpha", "entropy"]},
+              evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
+    run.restores(actor=actor, critic=critic, critic_target=critic_t, temperature=temperature, actor_opt=actor_opt,
+                 critic_opt=critic_opt, alpha_opt=alpha_opt, replay=buffer if config.replay_in_checkpoint else None,
+                 rng=rng, torch_rng=torch_rng(), obs=observations.saved())
+    run.records(spaces=sp)
+    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
     alpha_log: list[tuple[int, float, float]] = []
 
@@ -232,33 +232,31 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         with torch.no_grad():
             return actor(observations.tensor(obs).unsqueeze(0))[0][0].numpy()
 
+    def temperature_now() -> float:
+        return float(log_alpha.detach().exp())
+
+    def targets(mb: Minibatch) -> torch.Tensor:
+        return soft_target(actor, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma, temperature_now())
+
     def learn(step: int, mb: Minibatch) -> None:
         # [sac-learn]
-        alpha = float(log_alpha.detach().exp())
-        y = soft_target(actor, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma, alpha)
-        loss = critic_loss(critic, mb.obs, mb.actions, y)
-        critic_opt.zero_grad(set_to_none=True)
-        loss.backward()
-        critic_opt.step()
+        alpha = temperature_now()
+        y = targets(mb)
+        gradient_step(critic_opt, critic_loss(critic, mb.obs, mb.actions, y))
         with frozen(critic):
             loss, logp = actor_loss(actor, critic, mb.obs, alpha)
-            actor_opt.zero_grad(set_to_none=True)
-            loss.backward()
-        actor_opt.step()
+            gradient_step(actor_opt, loss)
         if config.autotune:
-            loss = temperature_loss(log_alpha, logp, target_entropy)
-            alpha_opt.zero_grad(set_to_none=True)
-            loss.backward()
-            alpha_opt.step()
+            gradient_step(alpha_opt, temperature_loss(log_alpha, logp, target_entropy))
         soft_update(critic_t, critic, config.tau)
         # [/sac-learn]
         entropy[0] = -float(logp.mean())
         if config.eval_every and step % config.eval_every == 0:
-            row = (step, float(log_alpha.detach().exp()), entropy[0])
+            row = (step, temperature_now(), entropy[0])
             alpha_log.append(row)
             run.log("alpha", step=row[0], alpha=row[1], entropy=row[2])
 
-    step = loop.run_until(steps, act, learn)
+    step = loop.run_until(steps, act, learn, critic, targets)
     a = np.array(alpha_log, dtype=float).reshape(-1, 3)
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns, step,
                   saved_policy(actor, observations), a[:, 0].astype(int), a[:, 1], a[:, 2])

@@ -222,8 +222,8 @@ def train(
     rng = np.random.default_rng(seed)
     Q = np.zeros((n_states, n_actions))
     run = Run(config.method, env_id, config, steps, seed, out, progress, desc=f"{config.method} {env_id}",
-              close=(env,), episode_log=EPISODE_COLUMNS + ["epsilon"], defer_interrupts=True)
-    run.track(q=q_table(Q), rng=rng)
+              close=(env,), episode_log=EPISODE_COLUMNS + ["epsilon"])
+    run.restores(q=q_table(Q), rng=rng)
     step, episode = run.resume(step=0, episode=0)
     with run:
         while step < steps:

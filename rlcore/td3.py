@@ -30,16 +30,14 @@ from torch import nn
 
 from rlcore.config import NON_NEGATIVE, check_budget, check_config
 from rlcore.ddpg import Result, make_optimizers, saved_policy  # noqa: F401 (Result: what train returns)
-from rlcore.harness import EPISODE_COLUMNS, Run, evaluation, torch_rng
+from rlcore.harness import Run, torch_rng
 from rlcore.nets import soft_update
 from rlcore.noise import GaussianNoise, exploration_state
-from rlcore.offpolicy import saved_actor
+from rlcore.offpolicy import POLICY_KEYS, policy_evaluation, saved_actor  # noqa: F401 (POLICY_KEYS: load_policy's)
 from rlcore.offpolicy import (ActionBox, Actor, Critic, DeterministicPolicy, Minibatch, Observations,
-                              OffPolicyConfig, OffPolicyLoop, Probe, TwinCritic, frozen, make_envs, make_replay,
-                              min_q)
+                              OffPolicyConfig, OffPolicyLoop, TwinCritic, UpdateHook, frozen, gradient_step, make_envs,
+                              make_replay, min_q)
 
-POLICY_KEYS = ("actor", "spaces", "obs_mean", "obs_var")
-"""Checkpoint keys :func:`load_policy` needs."""
 
 
 @dataclass
@@ -108,21 +106,13 @@ def actor_loss(actor: nn.Module, critic: nn.Module, obs: torch.Tensor) -> torch.
 
 def update_critics(critic: nn.Module, critic_opt: torch.optim.Optimizer, y: torch.Tensor, mb: Minibatch) -> float:
     """One Adam step on both critics' loss toward the target y."""
-    loss = critic_loss(critic, mb.obs, mb.actions, y)
-    critic_opt.zero_grad(set_to_none=True)
-    loss.backward()
-    critic_opt.step()
-    return float(loss.detach())
+    return gradient_step(critic_opt, critic_loss(critic, mb.obs, mb.actions, y))
 
 
 def update_actor(actor: nn.Module, actor_opt: torch.optim.Optimizer, critic: nn.Module, obs: torch.Tensor) -> float:
     """One Adam step along the deterministic policy gradient through Q_1 (the critics get no gradient)."""
     with frozen(critic):
-        loss = actor_loss(actor, critic, obs)
-        actor_opt.zero_grad(set_to_none=True)
-        loss.backward()
-    actor_opt.step()
-    return float(loss.detach())
+        return gradient_step(actor_opt, actor_loss(actor, critic, obs))
 
 
 # [td3-delayed]
@@ -141,9 +131,9 @@ def make_networks(sp: dict[str, Any], config: Config) -> tuple[Actor, nn.Module,
 
 
 def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, seed: int = 0,
-          out: str | Path | None = None, progress: bool = False, probe: Probe | None = None) -> Result:
-    """Train TD3 for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint). ``probe``: a
-    read-only diagnostic called before every learning step (:data:`rlcore.offpolicy.Probe`)."""
+          out: str | Path | None = None, progress: bool = False, on_update: UpdateHook | None = None) -> Result:
+    """Train TD3 for ``steps`` environment steps (resuming from ``out`` if it holds a checkpoint). ``on_update``: a
+    read-only diagnostic called before every learning step (:data:`rlcore.offpolicy.UpdateHook`)."""
     check_budget(steps, seed)
     config = config or Config()
     torch.manual_seed(seed)
@@ -156,14 +146,13 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     noise = GaussianNoise(sp["act_dim"], config.exploration_noise, seed=seed)
     observations = Observations(sp["obs_dim"], config.normalize_obs)
 
-    run = Run("td3", env_id, config, steps, seed, out, progress, desc=f"TD3 {env_id}", close=(env, eval_env),
-              evaluate=lambda: evaluation(saved_policy(actor, observations), eval_env, config.eval_episodes,
-                                          seed + 10_000),
-              episode_log=EPISODE_COLUMNS, defer_interrupts=True)
-    run.track(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
-              critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
-              torch_rng=torch_rng(), noise=exploration_state(noise, None, actor), spaces=sp, obs=observations.saved())
-    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box)
+    run = Run("td3", env_id, config, steps, seed, out, progress, close=(env, eval_env),
+              evaluation=policy_evaluation(lambda: saved_policy(actor, observations), eval_env, config, seed))
+    run.restores(actor=actor, critic=critic, actor_target=actor_t, critic_target=critic_t, actor_opt=actor_opt,
+                 critic_opt=critic_opt, replay=buffer if config.replay_in_checkpoint else None, rng=rng,
+                 torch_rng=torch_rng(), noise=exploration_state(noise, None, actor), obs=observations.saved())
+    run.records(spaces=sp)
+    loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
 
     def act(obs: np.ndarray) -> np.ndarray:
@@ -172,21 +161,20 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
             action = actor(observations.tensor(obs).unsqueeze(0))[0].numpy()
         return box.clip(action + box.half * noise())
 
+    def targets(mb: Minibatch) -> torch.Tensor:
+        return clipped_double_q_target(actor_t, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma,
+                                       config.target_policy_noise, config.target_noise_clip)
+
     def learn(step: int, mb: Minibatch) -> None:
         # [td3-learn]
-        def target() -> torch.Tensor:
-            return clipped_double_q_target(actor_t, critic_t, mb.next_obs, mb.rewards, mb.terminated, config.gamma,
-                                           config.target_policy_noise, config.target_noise_clip)
-        if probe is not None:
-            probe(step, mb, critic, target, config.gamma)
-        update_critics(critic, critic_opt, target(), mb)
+        update_critics(critic, critic_opt, targets(mb), mb)
         if delayed(step, config.policy_delay):
             update_actor(actor, actor_opt, critic, mb.obs)
             soft_update(actor_t, actor, config.tau)
             soft_update(critic_t, critic, config.tau)
         # [/td3-learn]
 
-    step = loop.run_until(steps, act, learn, episode_ended=noise.reset)
+    step = loop.run_until(steps, act, learn, critic, targets, episode_ended=noise.reset)
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns,
                   step, saved_policy(actor, observations))
 

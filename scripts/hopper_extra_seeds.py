@@ -5,7 +5,7 @@ Now that REPORT_DDPG_SEEDS["Hopper-v5"] lists all five, `python -m rlbook experi
 --only hopper-hidden2048` does the same; this script stays as the provenance of those two seeds."""
 from rlbook.registry import get_experiment
 from rlbook.runner import train_one
-from rlcore.runs import stop_on_signals
+from rlcore.signals import stop_on_signals
 
 stop_on_signals()
 spec = next(r for r in get_experiment("ddpg-report-sweeps").runs if r.name == "hopper-hidden2048")

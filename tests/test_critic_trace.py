@@ -18,7 +18,7 @@ def test_a_probed_run_is_the_run_without_the_probe(tmp_path):
     torch.set_num_threads(1)
     plain = ddpg.train("Pendulum-v1", ddpg.Config(**SMALL), steps=1_200, seed=3)
     probe = critic_trace.CriticProbe(every=100)
-    probed = ddpg.train("Pendulum-v1", ddpg.Config(**SMALL), steps=1_200, seed=3, probe=probe)
+    probed = ddpg.train("Pendulum-v1", ddpg.Config(**SMALL), steps=1_200, seed=3, on_update=probe)
     assert plain.eval_returns.tolist() == probed.eval_returns.tolist()
     for a, b in zip(plain.critic.parameters(), probed.critic.parameters()):
         assert torch.equal(a, b)
@@ -46,10 +46,25 @@ def test_stats_are_the_update_s_own_target_and_loss():
     assert stats["q_absmax"] >= abs(stats["q_mean"])
 
 
+@pytest.mark.parametrize("algo", ["td3", "sac"])
+def test_td3_and_sac_take_the_same_hook_and_it_sees_their_own_targets_and_changes_nothing(algo):
+    from rlcore.algos import get_algorithm
+
+    module = get_algorithm(algo)
+    small = dict(hidden=(32, 32), learning_starts=100, batch_size=32, buffer_size=5_000, eval_every=0)
+    torch.set_num_threads(1)
+    plain = module.train("Pendulum-v1", module.Config(**small), steps=400, seed=2)
+    probe = critic_trace.CriticProbe(every=50)
+    probed = module.train("Pendulum-v1", module.Config(**small), steps=400, seed=2, on_update=probe)
+    for a, b in zip(plain.critic.parameters(), probed.critic.parameters()):
+        assert torch.equal(a, b)
+    assert len(probe.rows) == 7 and all(np.isfinite(r["y_mean"]) for r in probe.rows)
+
+
 def test_a_what_if_changes_the_setting_it_names_and_says_so(monkeypatch):
     seen = {}
 
-    def fake_train(env_id, config, steps, seed, out, progress, probe):
+    def fake_train(env_id, config, steps, seed, out, progress, on_update):
         seen.update(config=config, steps=steps, seed=seed)
         return type("R", (), {"eval_steps": np.array([20_000]), "eval_returns": np.array([1.0])})()
 

@@ -169,6 +169,48 @@ def test_sharing_rollouts_keeps_the_workers_identical(tmp_path):
     assert load_checkpoint(out / "checkpoint.pt")["config"]["share"] == "rollouts"
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+TINY_CONFIG = {"num_envs": 2, "n_steps": 64, "batch_size": 32, "n_epochs": 2, "eval_every": 0}
+TIMING = {"env_steps_per_second", "update_seconds", "rollout_seconds"}
+
+
+def test_two_nodes_of_one_worker_train_the_two_worker_run(tmp_path):
+    # torchrun's multi-node rendezvous (c10d) with two agents on this machine as two "nodes" of one worker each:
+    # the job is the single-node two-worker one, bit for bit (gloo's sum of two numbers does not depend on order)
+    from rlcore.launch import torchrun_command
+
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    runs = {}
+    for name, nodes in (("one-node", 1), ("two-nodes", 2)):
+        out = tmp_path / name
+        cmd = torchrun_command(2 // nodes, "Pendulum-v1", 4 * PER_UPDATE, 1, out, TINY_CONFIG, nodes=nodes,
+                               rendezvous=f"localhost:{_free_port()}", job_id=f"test-{os.getpid()}",
+                               extra=["--dump-params", str(out / "dump")])
+        agents = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+                  for _ in range(nodes)]
+        logs = [a.communicate(timeout=300)[0] for a in agents]
+        assert [a.returncode for a in agents] == [0] * nodes, logs
+        runs[name] = out
+    one, two = runs["one-node"], runs["two-nodes"]
+    meta = json.loads((two / "meta.json").read_text())
+    assert meta["distributed"]["world_size"] == 2 and meta["command"].startswith("torchrun --nnodes 2 --nproc_per_node 1")
+    for rank in (0, 1):
+        a, b = load_checkpoint(one / "dump" / f"rank{rank}.pt"), load_checkpoint(two / "dump" / f"rank{rank}.pt")
+        assert a["iteration"] == 4 and _same(a, b), rank
+    assert _same(load_checkpoint(one / "checkpoint.pt")["agent"], load_checkpoint(two / "checkpoint.pt")["agent"])
+    x, y = read_csv(one / "progress.csv"), read_csv(two / "progress.csv")
+    assert x.keys() == y.keys() and len(x["step"]) == 4
+    for column in set(x) - TIMING:
+        np.testing.assert_array_equal(x[column], y[column], err_msg=column)
+
+
 def _gather_worker(rank: int, store_file: str, out_dir: str) -> None:
     torch.distributed.init_process_group("gloo", init_method=f"file://{store_file}", rank=rank, world_size=2)
     n = 3 + 2 * rank  # the workers' rollouts differ in length (reset steps are dropped)

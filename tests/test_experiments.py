@@ -118,7 +118,7 @@ def _train_until_interrupted(folder, i):
 
 
 def pool_main(folder):  # run in a subprocess by the test below, as `experiments run --jobs 2` would
-    from rlcore.runs import stop_on_signals
+    from rlcore.signals import stop_on_signals
 
     stop_on_signals()
     try:
@@ -390,3 +390,27 @@ def test_td3_and_sac_experiments_compare_like_with_like():
     ablation = {r.name: r for r in get_experiment("td3-ablation").runs}
     assert {r.env_id for r in ablation.values()} == {"Hopper-v5"} and all(len(r.seeds) == 5 for r in ablation.values())
     assert ablation["none"].overrides["policy_delay"] == 1 and not ablation["none"].overrides["clipped_double_q"]
+
+
+def test_an_interrupt_stops_the_torchrun_job_and_waits_for_it(tmp_path):
+    # a stand-in for torchrun: it says when it has started, and on SIGINT it stops (as torchrun stops its workers)
+    from rlbook.runner import run_torchrun
+
+    started, stopped = tmp_path / "started", tmp_path / "stopped"
+    code = (f"import pathlib, signal, sys, time; signal.signal(signal.SIGINT, lambda *a: (pathlib.Path("
+            f"{str(stopped)!r}).touch(), sys.exit(3))); pathlib.Path({str(started)!r}).touch(); time.sleep(120)")
+
+    def interrupt_once_started():  # Ctrl-C of this process, or Ray's cancel of its task
+        deadline = time.monotonic() + 120
+        while not started.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    import threading
+
+    threading.Thread(target=interrupt_once_started, daemon=True).start()
+    with pytest.raises(KeyboardInterrupt):
+        run_torchrun([sys.executable, "-c", code], dict(os.environ))
+    assert stopped.exists()  # the job got the SIGINT and had ended when the interrupt came out
+    with pytest.raises(subprocess.CalledProcessError):
+        run_torchrun([sys.executable, "-c", "raise SystemExit(5)"], dict(os.environ))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -10,7 +12,7 @@ import torch
 
 import rlcore.harness as harness
 from rlcore.checkpoint import load_checkpoint
-from rlcore.harness import Run, Saved, crossed, running_stats, torch_rng
+from rlcore.harness import Evaluation, Run, Saved, crossed, running_stats, torch_rng
 from rlcore.logger import read_csv
 
 
@@ -22,6 +24,14 @@ class ToyConfig:
     env_kwargs: dict = field(default_factory=dict)
 
 
+@pytest.fixture
+def sigint():
+    """SIGINT raises KeyboardInterrupt, as in a terminal or a notebook."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 class Closable:
     closed = False
 
@@ -29,17 +39,20 @@ class Closable:
         self.closed = True
 
 
-def toy_run(out, steps=10, interrupt_at=None, evaluate=True, **kw):
-    """A loop that 'learns' one weight, ends an 'episode' every 3 steps and is evaluated and checkpointed."""
+def toy_run(out, steps=10, interrupt_at=None, evaluate=True, at_end=False, **kw):
+    """A loop that 'learns' one weight, ends an 'episode' every 3 steps and is evaluated and checkpointed; with
+    ``interrupt_at``, Ctrl-C comes in the middle of that step."""
     torch.manual_seed(0)
     net = torch.nn.Linear(1, 1)
     opt = torch.optim.SGD(net.parameters(), lr=0.1)
     rng = np.random.default_rng(0)
     box = Closable()
+    evaluation = Evaluation(lambda: {"mean_return": float(net.weight.item()), "std_return": 0.0, "episodes": 1},
+                            at_end=at_end)
     run = Run("toy", "Toy-v0", ToyConfig(), steps, 0, out, close=(box,), desc="toy",
-              evaluate=(lambda: {"mean_return": float(net.weight.item()), "std_return": 0.0, "episodes": 1})
-              if evaluate else None, **kw)
-    run.track(net=net, opt=opt, rng=rng, torch_rng=torch_rng(), spaces={"n": 1}, nothing=None)
+              evaluation=evaluation if evaluate else None, **kw)
+    run.restores(net=net, opt=opt, rng=rng, torch_rng=torch_rng(), nothing=None)
+    run.records(spaces={"n": 1})
     step, episode = run.resume(step=0, episode=0)
     with run:
         while step < steps:
@@ -49,7 +62,7 @@ def toy_run(out, steps=10, interrupt_at=None, evaluate=True, **kw):
             opt.step()
             step += 1
             if interrupt_at == step:
-                raise KeyboardInterrupt
+                os.kill(os.getpid(), signal.SIGINT)
             if step % 3 == 0:
                 episode += 1
                 run.record_episode(step, float(step), 3)
@@ -57,22 +70,24 @@ def toy_run(out, steps=10, interrupt_at=None, evaluate=True, **kw):
     return run, net, box
 
 
-def test_an_interrupted_run_resumes_to_exactly_the_uninterrupted_one(tmp_path):
+def test_an_interrupted_run_resumes_to_exactly_the_uninterrupted_one(tmp_path, sigint):
     whole, net_whole, _ = toy_run(tmp_path / "whole")
     with pytest.raises(KeyboardInterrupt):
         toy_run(tmp_path / "cut", interrupt_at=8)
     ckpt = load_checkpoint(tmp_path / "cut" / "checkpoint.pt")
-    # the checkpoint counts the 7 steps completed; the constants and the tracked state are in it, None is not
-    assert ckpt["step"] == 7 and ckpt["episode"] == 2 and not ckpt["complete"]
+    # the eighth step ran to its end: the checkpoint counts it; what the run restores and what it only records are
+    # in it, None is not
+    assert ckpt["step"] == 8 and ckpt["episode"] == 2 and not ckpt["complete"]
     assert ckpt["spaces"] == {"n": 1} and "nothing" not in ckpt and {"net", "opt", "rng", "torch_rng"} <= set(ckpt)
-    # the resumed run finishes the budget, its log has every episode once
-    resumed, _, _ = toy_run(tmp_path / "cut")
+    # the resumed run finishes the budget, its log has every episode once, and it is the uninterrupted run
+    resumed, net_again, _ = toy_run(tmp_path / "cut")
     assert resumed.episode_end_steps.tolist() == [9] and load_checkpoint(tmp_path / "cut" / "checkpoint.pt")["complete"]
     assert read_csv(tmp_path / "cut" / "progress.csv")["step"].tolist() == [3, 6, 9]
-    # one resumed from a periodic checkpoint (step 5, taken after the step's work) is the uninterrupted run
+    assert torch.equal(net_whole.weight, net_again.weight) and torch.equal(net_whole.bias, net_again.bias)
+    # stopped at a step that ends an episode and crosses a checkpoint step
     with pytest.raises(KeyboardInterrupt):
         toy_run(tmp_path / "exact", interrupt_at=6)
-    assert load_checkpoint(tmp_path / "exact" / "checkpoint.pt")["step"] == 5
+    assert load_checkpoint(tmp_path / "exact" / "checkpoint.pt")["step"] == 6
     again, net_again, _ = toy_run(tmp_path / "exact")
     assert torch.equal(net_whole.weight, net_again.weight) and torch.equal(net_whole.bias, net_again.bias)
     log = read_csv(tmp_path / "exact" / "progress.csv")
@@ -96,7 +111,7 @@ def test_evaluations_checkpoints_and_the_end(tmp_path, monkeypatch):
 
 
 def test_eval_at_end_and_a_target_beyond_the_budget(tmp_path):
-    run, _, _ = toy_run(tmp_path, steps=10, target=10, eval_at_end=True)
+    run, _, _ = toy_run(tmp_path, steps=10, target=10, at_end=True)
     assert run.eval_steps.tolist() == [4, 8, 10]
 
 
@@ -120,8 +135,8 @@ def test_saved_pairs_and_running_statistics_round_trip(tmp_path):
     table = np.arange(4.0)
     loaded = []
     run = Run("toy", "Toy-v0", ToyConfig(), 3, 0, tmp_path, desc="toy")
-    run.track(table=Saved(lambda: {"table": table}, lambda c: table.__setitem__(..., c["table"].numpy())),
-              obs=running_stats(rms, "obs", lambda: loaded.append(True)), ret=running_stats(None, "ret"))
+    run.restores(table=Saved(lambda: {"table": table}, lambda c: table.__setitem__(..., c["table"].numpy())),
+                 obs=running_stats(rms, "obs", lambda: loaded.append(True)), ret=running_stats(None, "ret"))
     run.resume(step=3)
     with run:
         pass
@@ -130,34 +145,38 @@ def test_saved_pairs_and_running_statistics_round_trip(tmp_path):
     table[:] = 0
     rms.mean[:] = 0
     again = Run("toy", "Toy-v0", ToyConfig(), 3, 0, tmp_path, desc="toy")
-    again.track(table=Saved(lambda: {"table": table}, lambda c: table.__setitem__(..., c["table"].numpy())),
-                obs=running_stats(rms, "obs", lambda: loaded.append(True)))
+    again.restores(table=Saved(lambda: {"table": table}, lambda c: table.__setitem__(..., c["table"].numpy())),
+                   obs=running_stats(rms, "obs", lambda: loaded.append(True)))
     assert again.resume(step=0) == 3
     assert table.tolist() == [0.0, 1.0, 2.0, 3.0] and rms.mean.tolist() == pytest.approx([2.0, 4.0], rel=1e-3)
     assert loaded == [True]
+
+
+def test_what_a_resume_cannot_restore_is_refused_and_goes_to_records(tmp_path):
+    run = Run("toy", "Toy-v0", ToyConfig(), 3, 0, tmp_path, desc="toy")
+    with pytest.raises(TypeError, match="cannot restore 'spaces'.*Run.records"):
+        run.restores(spaces={"n": 1})
+    run.records(spaces={"n": 1})
+    run.resume(step=3)
+    with run:
+        pass
+    assert load_checkpoint(tmp_path / "checkpoint.pt")["spaces"] == {"n": 1}
 
 
 def test_crossed():
     assert crossed(4, 4, 3) and crossed(4, 9, 7) and not crossed(4, 7, 4) and not crossed(0, 8, 0)
 
 
-def test_an_evaluation_leaves_every_network_in_the_mode_it_found_it():
-    policy = torch.nn.Sequential(torch.nn.Linear(1, 1), torch.nn.Dropout(0.5))
-    target = torch.nn.Linear(1, 1).eval()              # kept in evaluation mode by its algorithm
-    policy[1].eval()                                   # a part in another mode than its parent
-    seen = []
+def test_policies_and_evaluations_leave_every_network_in_training_mode():
+    from rlcore.dqn import GreedyPolicy
+    from rlcore.offpolicy import DeterministicPolicy
+    from rlcore.onpolicy import ActorCritic, ActorCriticPolicy
 
-    def evaluate():
-        policy.eval()
-        target.train()                                 # an evaluation that touches the modes
-        seen.append((policy.training, target.training))
-        return {"mean_return": 0.0, "std_return": 0.0, "episodes": 1}
-
-    run = Run("toy", "Toy-v0", ToyConfig(), 1, 0, None, desc="toy", evaluate=evaluate)
-    run.track(policy=policy, target=target)
-    run.evaluate_now(1)
-    assert seen == [(False, True)]
-    assert policy.training and not policy[1].training and not target.training
+    q, actor, agent = torch.nn.Linear(2, 2), torch.nn.Linear(2, 1), ActorCritic(2, 1, False, (4,))
+    policies = GreedyPolicy(q), DeterministicPolicy(actor), ActorCriticPolicy(agent, low=[-1.0], high=[1.0])
+    for policy in policies:
+        policy(np.zeros(2, dtype=np.float32))
+    assert q.training and actor.training and agent.training  # nothing for the harness to put back
 
 
 def test_deferred_ctrl_c_stops_at_the_end_of_the_step_and_a_second_one_stops_at_once(tmp_path):
@@ -168,7 +187,7 @@ def test_deferred_ctrl_c_stops_at_the_end_of_the_step_and_a_second_one_stops_at_
     try:
         for presses, stopped_at in ((1, 4), (2, 3)):
             run = Run("toy", "Toy-v0", ToyConfig(checkpoint_every=100), 10, 0, tmp_path / f"p{presses}",
-                      desc="toy", defer_interrupts=True)
+                      desc="toy")
             step, where = run.resume(step=0), []
             with pytest.raises(KeyboardInterrupt):
                 with run:
@@ -212,7 +231,7 @@ def test_the_loaded_checkpoint_is_released_once_the_run_is_resumed(tmp_path):
     toy_run(tmp_path, steps=5, target=10)
     run = Run("toy", "Toy-v0", ToyConfig(), 5, 0, tmp_path, desc="toy")
     net = torch.nn.Linear(1, 1)
-    run.track(net=net)
+    run.restores(net=net)
     weight = weakref.ref(run.ckpt["net"]["weight"])  # one of the checkpoint's tensors, copied into net on resume
     assert run.resume(step=0) == 5
     gc.collect()
@@ -228,8 +247,8 @@ def test_a_second_ctrl_c_in_the_middle_of_a_step_leaves_no_checkpoint_that_mixes
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         net = torch.nn.Linear(1, 1)
-        run = Run("toy", "Toy-v0", ToyConfig(checkpoint_every=2), 10, 0, tmp_path, desc="toy", defer_interrupts=True)
-        run.track(net=net)
+        run = Run("toy", "Toy-v0", ToyConfig(checkpoint_every=2), 10, 0, tmp_path, desc="toy")
+        run.restores(net=net)
         step = run.resume(step=0)
         with pytest.raises(KeyboardInterrupt):
             with run:

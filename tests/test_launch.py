@@ -25,6 +25,15 @@ def test_torchrun_command_is_what_rlcore_dppo_parses():
         torchrun_command(0, "CartPole-v1", 10, 0, "o")
 
 
+def test_several_nodes_meet_at_a_rendezvous_instead_of_standalone():
+    cmd = torchrun_command(1, "Pendulum-v1", 1_000, 0, "runs/x", nodes=2, rendezvous="host0:29400", job_id="hc1")
+    assert cmd[3:9] == ["--nnodes=2", "--rdzv-backend=c10d", "--rdzv-endpoint=host0:29400", "--rdzv-id=hc1",
+                        "--nproc_per_node=1", "--max-restarts=0"]
+    assert "--standalone" not in cmd and build_parser().parse_args(cmd[11:]).out == "runs/x"
+    with pytest.raises(ValueError, match="rendezvous endpoint"):
+        torchrun_command(1, "Pendulum-v1", 1_000, 0, "o", nodes=2)
+
+
 def test_children_and_rank_of_a_started_process():
     code = "import subprocess, sys, time; subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)']); time.sleep(30)"
     parent = subprocess.Popen([sys.executable, "-c", code], env={**os.environ, "RANK": "7"})

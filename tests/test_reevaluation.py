@@ -11,7 +11,7 @@ from rlbook.reevaluation import (action_clipping_returns, final_policy_returns,
                                  trained_before_clipping_fix)
 from rlcore.evaluate import evaluate_policy
 from rlcore.ppo import Config, train
-from rlcore.runs import cpu_model
+from rlcore.machine import cpu_model
 
 
 @pytest.fixture(scope="module")

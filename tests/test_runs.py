@@ -1,4 +1,4 @@
-"""rlcore.runs: what a run records about the code that trained it."""
+"""rlcore.provenance and rlcore.runs: what a run records about the code that trained it; its folder."""
 
 import json
 import os
@@ -8,13 +8,13 @@ from dataclasses import dataclass
 
 import pytest
 
-from rlcore import runs
+from rlcore import machine, provenance, runs
 
 
 def test_a_process_records_the_commit_it_loaded_not_the_checkouts_later_one():
     # a long experiment process keeps the code it imported while the checkout moves on to new commits
     # (the command lines ask for loaded_commit() as they start; a library user's first run_metadata() does)
-    code = ("import os, rlcore.runs as r; r.loaded_commit(); os.environ['RLCORE_COMMIT'] = 'later'; "
+    code = ("import os, rlcore.provenance as r; r.loaded_commit(); os.environ['RLCORE_COMMIT'] = 'later'; "
             "m = r.run_metadata(); print(m['commit'], m['checkout_at_start'])")
     out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "RLCORE_COMMIT": "loaded"},
                          capture_output=True, text=True, check=True).stdout.split()
@@ -24,7 +24,7 @@ def test_a_process_records_the_commit_it_loaded_not_the_checkouts_later_one():
 def test_importing_the_library_runs_no_git():
     code = ("import subprocess; calls = []; run = subprocess.run\n"
             "subprocess.run = lambda *a, **k: calls.append(a) or run(*a, **k)\n"
-            "import rlcore.runs, rlcore.harness, rlcore.ddpg, rlcore.__main__\n"
+            "import rlcore.runs, rlcore.provenance, rlcore.harness, rlcore.ddpg, rlcore.__main__\n"
             "print(len(calls))")
     env = {k: v for k, v in os.environ.items() if k != "RLCORE_COMMIT"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
@@ -36,13 +36,13 @@ def test_no_checkout_field_while_the_checkout_is_what_was_loaded(tmp_path, monke
     class Tiny:
         lr: float = 0.1
 
-    monkeypatch.setattr(runs, "loaded_commit", lambda: "abc")
-    monkeypatch.setattr(runs, "git_commit", lambda cwd=None: "abc")
+    monkeypatch.setattr(provenance, "loaded_commit", lambda: "abc")
+    monkeypatch.setattr(provenance, "git_commit", lambda cwd=None: "abc")
     run, ckpt = runs.open_run(tmp_path / "run", "q-learning", "FrozenLake-v1", 0, 10, Tiny())
     meta = json.loads(run.meta.read_text())
     assert ckpt is None and meta["commit"] == "abc" and "checkout_at_start" not in meta
-    monkeypatch.setattr(runs, "git_commit", lambda cwd=None: "def+dirty")
-    assert runs.run_metadata()["checkout_at_start"] == "def+dirty"
+    monkeypatch.setattr(provenance, "git_commit", lambda cwd=None: "def+dirty")
+    assert provenance.run_metadata()["checkout_at_start"] == "def+dirty"
 
 
 def test_changes_under_results_do_not_make_a_checkout_dirty(tmp_path, monkeypatch):
@@ -57,12 +57,46 @@ def test_changes_under_results_do_not_make_a_checkout_dirty(tmp_path, monkeypatc
     (tmp_path / "code.py").write_text("x = 1\n")
     git("add", ".")
     git("-c", "user.name=t", "-c", "user.email=t@example.org", "commit", "-qm", "start")
-    clean = runs.git_commit(tmp_path)
+    clean = provenance.git_commit(tmp_path)
     assert clean is not None and len(clean) == 40
     (tmp_path / "results" / "eval.csv").write_text("2\n")  # a run's outputs being copied in
-    assert runs.git_commit(tmp_path) == clean
+    assert provenance.git_commit(tmp_path) == clean
     (tmp_path / "code.py").write_text("x = 2\n")
-    assert runs.git_commit(tmp_path) == clean + "+dirty"
+    assert provenance.git_commit(tmp_path) == clean + "+dirty"
+
+
+def test_a_dirty_checkout_records_which_files_were_uncommitted_and_a_hash_of_their_changes(tmp_path, monkeypatch):
+    monkeypatch.delenv("RLCORE_COMMIT", raising=False)
+
+    def git(*args):
+        subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "code.py").write_text("x = 1\n")
+    (tmp_path / "other.py").write_text("y = 1\n")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@example.org", "commit", "-qm", "start")
+    assert provenance.uncommitted_changes(tmp_path) is None
+    (tmp_path / "code.py").write_text("x = 2\n")
+    first = provenance.uncommitted_changes(tmp_path)
+    assert first["files"] == [" M code.py"] and len(first["diff_sha256"]) == 64
+    (tmp_path / "code.py").write_text("x = 3\n")  # the same file, other changes: another hash
+    second = provenance.uncommitted_changes(tmp_path)
+    assert second["files"] == first["files"] and second["diff_sha256"] != first["diff_sha256"]
+
+
+def test_a_run_from_a_dirty_checkout_records_its_changes_and_a_command_warns_in_one_line(monkeypatch):
+    changes = {"files": [" M rlcore/ppo.py", " M rlcore/dqn.py"], "diff_sha256": "ab" * 32}
+    monkeypatch.setattr(provenance, "loaded_commit", lambda: "abc+dirty")
+    monkeypatch.setattr(provenance, "loaded_changes", lambda: changes)
+    monkeypatch.setattr(provenance, "git_commit", lambda cwd=None: "abc+dirty")
+    assert provenance.run_metadata()["uncommitted"] == changes
+    warning = provenance.dirty_warning()
+    assert "\n" not in warning and "rlcore/ppo.py, rlcore/dqn.py" in warning
+    monkeypatch.setattr(provenance, "loaded_commit", lambda: "abc")
+    monkeypatch.setattr(provenance, "loaded_changes", lambda: None)
+    monkeypatch.setattr(provenance, "git_commit", lambda cwd=None: "abc")
+    assert "uncommitted" not in provenance.run_metadata() and provenance.dirty_warning() is None
 
 
 def test_a_run_does_not_resume_a_checkpoint_of_other_settings(tmp_path):
@@ -123,8 +157,9 @@ def test_the_recorded_command_names_the_module_a_user_would_run(monkeypatch):
 
     import rlbook
     import rlcore
-    from rlcore.runs import command_line
+    from rlcore.provenance import command_line
 
+    monkeypatch.delenv("RLCORE_COMMAND", raising=False)
     package = Path(rlcore.__file__).resolve().parent
     monkeypatch.setattr("sys.argv", [str(package / "__main__.py"), "train", "dqn"])
     assert command_line() == "python -m rlcore train dqn"
@@ -135,13 +170,16 @@ def test_the_recorded_command_names_the_module_a_user_would_run(monkeypatch):
     assert command_line() == "python -m rlbook experiments run x"
     monkeypatch.setattr("sys.argv", ["/somewhere/benchmarks/ppo_vs_sb3.py", "--steps", "10"])
     assert command_line() == "ppo_vs_sb3.py --steps 10"
+    # a process that trains for a command typed on another machine (a Ray task) records that command
+    monkeypatch.setenv("RLCORE_COMMAND", "python -m rlbook experiments run x --ray auto")
+    assert command_line() == "python -m rlbook experiments run x --ray auto"
 
 
 @pytest.mark.parametrize("raw", ["0", "-1", "two", ""])
 def test_a_bad_thread_count_is_refused_in_one_line(raw, monkeypatch):
     monkeypatch.setenv("RLCORE_TORCH_THREADS", raw)
     with pytest.raises(ValueError, match="RLCORE_TORCH_THREADS.*whole number"):
-        runs.torch_threads()
+        machine.torch_threads()
 
 
 def test_the_thread_count_is_set_and_recorded_in_the_metadata(monkeypatch):
@@ -150,12 +188,12 @@ def test_the_thread_count_is_set_and_recorded_in_the_metadata(monkeypatch):
     before = torch.get_num_threads()
     try:
         monkeypatch.setenv("RLCORE_TORCH_THREADS", "2")
-        assert runs.torch_threads() == 2
+        assert machine.torch_threads() == 2
         assert torch.get_num_threads() == 2
-        assert runs.run_metadata()["machine"]["torch_threads"] == 2
+        assert provenance.run_metadata()["machine"]["torch_threads"] == 2
         monkeypatch.delenv("RLCORE_TORCH_THREADS")
-        assert runs.torch_threads() == 1
-        assert runs.run_metadata()["machine"]["torch_threads"] == 1
+        assert machine.torch_threads() == 1
+        assert provenance.run_metadata()["machine"]["torch_threads"] == 1
     finally:
         torch.set_num_threads(before)
 

@@ -129,25 +129,3 @@ def test_fixed_temperature_stays_fixed_and_bad_input_is_one_line():
         sac.Config(alpha=0.0)
     with pytest.raises(ValueError, match="SAC needs a continuous"):
         sac.train("CartPole-v1", sac.Config(**SMALL), steps=10)
-
-
-def test_through_the_command_line(tmp_path):
-    import json
-    import subprocess
-    import sys
-
-    def rlcore(*args):
-        return subprocess.run([sys.executable, "-m", "rlcore", *map(str, args)], capture_output=True, text=True,
-                              timeout=300)
-
-    out = tmp_path / "sac"
-    proc = rlcore("train", "sac", "--env", "Pendulum-v1", "--steps", 300, "--out", out, "--no-progress",
-                  "--set", "learning_starts=100", "--set", "hidden=[32]", "--set", "eval_every=300")
-    assert proc.returncode == 0, proc.stderr
-    result = json.loads(rlcore("evaluate", out, "--episodes", 1).stdout.splitlines()[-1])
-    assert result["algo"] == "sac" and result["train_steps"] == 300
-    assert (out / "alpha.csv").read_text().splitlines()[0] == "step,alpha,entropy"
-    proc = rlcore("train", "sac", "--env", "Pendulum-v1", "--steps", 10, "--out", tmp_path / "bad",
-                  "--set", "alpha=-1")
-    lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == 2 and len(lines) == 1 and "alpha must be > 0" in lines[0], proc.stderr

@@ -1,0 +1,383 @@
+"""The experiment runner on a Ray cluster: ``experiments run NAME --ray ADDRESS`` and ``experiments snapshot NAME
+--ray ADDRESS``. Ray is optional (``pip install ray==2.60.0``); without ``--ray`` nothing here is imported.
+
+Each missing (experiment, run, seed) becomes one Ray task that asks for one CPU (a DPPO run for one per worker) and
+runs :func:`rlbook.runner.train_one`, the function the local process pool runs, on whichever node Ray picks. It
+trains in the run folder ``WORK/<experiment>/<run>/seed-<s>/`` *on that node* and writes its small outputs to a
+temporary results folder there; the task hands those files back, and the submitting machine writes them to its
+``results/``: the same files, with the same provenance, as a local run (``meta.json`` records the command typed on
+the submitting machine, and the node's machine, versions and commit).
+
+While the tasks run, each running seed reports its step and latest evaluation to a small actor (:class:`Board`)
+that the submitting machine polls for its progress bars. Ctrl-C there cancels the tasks: each running seed gets a
+KeyboardInterrupt, writes its checkpoint and stops, as under the local pool, and the same command resumes it.
+
+A task whose worker process or node dies is retried by Ray (:data:`RETRIES` times). With ``--work`` (alias
+``--runs-dir``) on storage every node sees, the retry resumes from the seed's last checkpoint; otherwise a retry
+that lands on another node finds no checkpoint and starts the seed again, and the submitting machine says so.
+
+``experiments snapshot --ray`` asks the boards of the ``experiments run --ray`` commands in progress where each seed
+trains, and runs :func:`rlbook.runner.snapshot_one` on that node; seeds no board knows are snapshot here, from the
+run folders this machine sees.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+import threading
+import uuid
+from pathlib import Path
+from typing import Any
+
+from rlbook.registry import RunSpec, run_paths
+from rlbook.runner import LOGS, SNAPSHOT, SNAPSHOT_POLICY, snapshot_one, train_one
+
+RAY_VERSION = "2.60.0"
+"""The Ray release the book is tested with (``requirements.txt``)."""
+INSTALL = f"pip install ray=={RAY_VERSION}"
+
+RETRIES = 3
+"""How many times Ray starts a seed again whose worker process (or node) died."""
+NAMESPACE = "rlbook"
+"""The Ray namespace of the boards, so that ``experiments snapshot --ray`` finds them from another driver."""
+BOARD_PREFIX = "rlbook-board-"
+POLL_SECONDS = 1.0
+"""How often a task reads its seed's logs for the board, and the submitting machine reads the board."""
+STOP_SECONDS = 300.0
+"""How long, after Ctrl-C, the submitting machine waits for the cancelled seeds to write their checkpoints."""
+RESULT_FILES = (*LOGS, "policy.pt", SNAPSHOT, SNAPSHOT_POLICY)
+"""The files of a seed's results folder that the runner writes, and a node hands back."""
+
+
+def import_ray():
+    """Ray, or a one-line error that says how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise ValueError(f"--ray needs Ray, which is not installed here: {INSTALL}") from None
+    return ray
+
+
+def connect(address: str, cpus: int | None = None):
+    """Join the Ray cluster at ``address`` (``auto``: the one ``ray start`` runs on this machine; ``HOST:PORT``), or
+    with ``local`` start one on this machine with ``cpus`` CPUs (default: all); a connected driver stays. Returns
+    the ``ray`` module.
+
+    Ray starts its worker processes at nice 15; a cluster of this machine alone starts them at this process's
+    niceness instead (unless ``RAY_worker_niceness`` says otherwise), as the local pool's workers run, so that on a
+    shared machine the seeds are not pushed behind everything else."""
+    import logging
+
+    ray = import_ray()
+    if ray.is_initialized():
+        return ray
+    try:
+        if address == "local":
+            os.environ.setdefault("RAY_worker_niceness", str(os.nice(0)))
+            ray.init(address="local", num_cpus=cpus, include_dashboard=False, namespace=NAMESPACE,
+                     logging_level=logging.WARNING)
+        else:
+            ray.init(address=address, namespace=NAMESPACE, logging_level=logging.WARNING)
+    except ConnectionError as exc:
+        raise ValueError(f"no Ray cluster at {address!r} ({str(exc).splitlines()[0]}); start one with "
+                         "`ray start --head`, or train on a cluster of this machine alone with --ray local") from None
+    return ray
+
+
+def seed_key(exp: str, run: str, seed: int) -> str:
+    return f"{exp}/{run}/seed-{seed}"
+
+
+# --- a seed's results folder, moved between machines ----------------------------------------------------------
+
+
+def pack(folder: Path) -> dict[str, bytes]:
+    """The :data:`RESULT_FILES` that ``folder`` holds, by name."""
+    return {name: (folder / name).read_bytes() for name in RESULT_FILES if (folder / name).is_file()}
+
+
+def unpack(files: dict[str, bytes], folder: Path) -> None:
+    """Make ``folder``'s :data:`RESULT_FILES` those of ``files``: write each, remove the others (files the runner
+    does not write, such as stored re-evaluations, stay)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in RESULT_FILES:
+        if name in files:
+            tmp = folder / f".{name}.tmp"
+            tmp.write_bytes(files[name])
+            os.replace(tmp, folder / name)
+        else:
+            (folder / name).unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def command_typed(command: str | None):
+    """Inside: :func:`rlcore.provenance.command_line` is ``command`` (``RLCORE_COMMAND``), the one typed on the submitting
+    machine; afterwards the environment is as it was (a Ray worker process runs task after task)."""
+    before = os.environ.get("RLCORE_COMMAND")
+    if command:
+        os.environ["RLCORE_COMMAND"] = command
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("RLCORE_COMMAND", None)
+        else:
+            os.environ["RLCORE_COMMAND"] = before
+
+
+def on_node(fn, exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], work: str, command: str | None,
+            **kwargs: Any) -> tuple[str, dict[str, bytes], str]:
+    """Run ``fn`` (:func:`~rlbook.runner.train_one` or :func:`~rlbook.runner.snapshot_one`) for one seed on this
+    node, with a temporary results folder that starts as the submitting machine's (``current``): returns its status
+    line, the folder's files afterwards, and the folder's path (which the line names)."""
+    with tempfile.TemporaryDirectory(prefix="rlbook-results-") as tmp, command_typed(command):
+        _, result_dir = run_paths(exp, spec.name, seed, tmp, work)
+        unpack(current, result_dir)
+        line = fn(exp, spec, seed, Path(tmp), Path(work), **kwargs)
+        return line, pack(result_dir), str(result_dir)
+
+
+# --- the tasks ---------------------------------------------------------------------------------------------------
+
+
+def last_value(path: Path, column: str) -> float | None:
+    """``column`` of the last row of the CSV log ``path`` (read from its end), or None if there is none yet."""
+    try:
+        with open(path, "rb") as f:
+            header = f.readline().decode().strip().split(",")
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - 4096))
+            rows = f.read().decode(errors="replace").strip().splitlines()
+        if len(rows) < 2 and rows and rows[-1].split(",") == header:
+            return None
+        return float(rows[-1].split(",")[header.index(column)])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def watch(work_dir: Path, key: str, board, stop: threading.Event) -> None:
+    """Report the seed's step (``progress.csv``) and latest evaluation (``eval.csv``) to ``board`` when they change,
+    every :data:`POLL_SECONDS`, until ``stop`` is set."""
+    seen = None
+    while not stop.wait(POLL_SECONDS):
+        now = (last_value(work_dir / "progress.csv", "step"), last_value(work_dir / "eval.csv", "mean_return"))
+        if now != seen:
+            board.report.remote(key, *now)
+            seen = now
+
+
+def train_task(exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], work: str, command: str | None,
+               board) -> tuple[str, dict[str, bytes], str]:
+    """One seed, on a Ray worker: :func:`~rlbook.runner.train_one` (:func:`on_node`), its progress on ``board``."""
+    import ray
+
+    work_dir, _ = run_paths(exp, spec.name, seed, tempfile.gettempdir(), work)
+    key = seed_key(exp, spec.name, seed)
+    resumable = last_value(work_dir / "progress.csv", "step") if (work_dir / "checkpoint.pt").exists() else None
+    node = ray.get_runtime_context().get_node_id()
+    note = ray.get(board.attempt.remote(key, node, os.getpid(), resumable))
+    if note:
+        print(note, file=sys.stderr, flush=True)
+    stop = threading.Event()
+    watcher = threading.Thread(target=watch, args=(work_dir, key, board, stop), daemon=True)
+    watcher.start()
+    try:
+        return on_node(train_one, exp, spec, seed, current, work, command)
+    finally:
+        stop.set()
+        watcher.join()
+
+
+def snapshot_task(exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], work: str, command: str | None,
+                  policy: bool) -> tuple[str, dict[str, bytes], str]:
+    """:func:`~rlbook.runner.snapshot_one` on the node where the seed trains (:func:`on_node`)."""
+    return on_node(snapshot_one, exp, spec, seed, current, work, command, policy=policy)
+
+
+class Board:
+    """Where each seed of one ``experiments run --ray`` trains and how far it is: the tasks report, the submitting
+    machine (and ``experiments snapshot --ray``) read. A Ray actor with no CPU of its own."""
+
+    def __init__(self) -> None:
+        self.seeds: dict[str, dict[str, Any]] = {}
+
+    def attempt(self, key: str, node: str, pid: int, resumable: float | None) -> str | None:
+        """A task starts ``key`` on ``node`` in process ``pid``, with a checkpoint whose logs reach step
+        ``resumable`` (None: no checkpoint there). Returns what to say if this is a retry."""
+        seed = self.seeds.setdefault(key, {"attempts": [], "step": None, "eval": None, "notes": []})
+        note = None
+        if seed["attempts"]:
+            died = seed["attempts"][-1]
+            reached = f"step {int(seed['step']):,}" if seed["step"] is not None else "its start"
+            how = (f"resuming from its checkpoint (logs to step {int(resumable):,})" if resumable is not None else
+                   "restarting from step 0: no checkpoint in its run folder there" +
+                   (f" (the last one is on node {died['node'][:8]}; give --runs-dir on storage every node sees "
+                    "to resume instead)" if died["node"] != node else ""))
+            note = (f"{key}: its worker (pid {died['pid']}, node {died['node'][:8]}) died at {reached}; "
+                    f"retried on node {node[:8]}, {how}")
+            seed["notes"].append(note)
+        seed["attempts"].append({"node": node, "pid": pid})
+        return note
+
+    def report(self, key: str, step: float | None, evaluation: float | None) -> None:
+        self.seeds[key].update(step=step, eval=evaluation)
+
+    def state(self) -> dict[str, dict[str, Any]]:
+        return self.seeds
+
+
+# --- the submitting machine -----------------------------------------------------------------------------------
+
+
+class SeedBars:
+    """On the submitting machine: a bar over the seeds, and one per running seed with its step and latest
+    evaluation (from the board); the notes of retried seeds are printed as they come."""
+
+    def __init__(self, steps: dict[str, int], desc: str, enabled: bool):
+        from tqdm import tqdm
+
+        self.tqdm, self.steps, self.enabled, self.bars, self.said = tqdm, steps, enabled, {}, set()
+        self.total = tqdm(total=len(steps), desc=desc, unit="run", disable=not enabled)
+
+    def show(self, state: dict[str, dict[str, Any]]) -> None:
+        for key, seed in state.items():
+            for note in seed["notes"]:
+                if note not in self.said:
+                    self.said.add(note)
+                    self.tqdm.write(note, file=sys.stderr)
+            if key not in self.steps or not self.enabled:
+                continue
+            if key not in self.bars:
+                self.bars[key] = self.tqdm(total=self.steps[key], desc=key, unit="step", leave=False)
+            bar = self.bars[key]
+            bar.n = int(seed["step"] or 0)
+            if seed["eval"] is not None:
+                bar.set_postfix(eval=f"{seed['eval']:.1f}", refresh=False)
+            bar.refresh()
+
+    def done(self, key: str) -> None:
+        self.total.update(1)
+        if key in self.bars:
+            self.bars.pop(key).close()
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+        self.total.close()
+
+
+def new_board(ray):
+    """A :class:`Board` actor for one submission, named so that another driver finds it, alive while this one is."""
+    return ray.remote(num_cpus=0)(Board).options(name=f"{BOARD_PREFIX}{uuid.uuid4().hex[:12]}",
+                                                 namespace=NAMESPACE).remote()
+
+
+def run_on_ray(name: str, tasks: list[tuple[RunSpec, int]], results: Path, work: Path, address: str,
+               cpus: int | None = None, progress: bool = True) -> list[str]:
+    """Train each missing ``(spec, seed)`` of ``tasks`` of experiment ``name`` as a Ray task on the cluster at
+    ``address`` (:func:`connect`) and write its results here; returns the status lines, as
+    :func:`rlbook.runner.train_all` does. A seed's failure, or Ctrl-C, cancels the others (:func:`stop`): each
+    running one checkpoints, so that the same command resumes them."""
+    from rlcore.provenance import command_line
+
+    ray = connect(address, cpus)
+    board, command, lines, refs = new_board(ray), command_line(), [], {}
+    remote = ray.remote(train_task)
+    for spec, s in tasks:
+        _, result_dir = run_paths(name, spec.name, s, results, work)
+        if (result_dir / "policy.pt").exists():
+            lines.append(f"{seed_key(name, spec.name, s)}: already in {result_dir}")
+            continue
+        ref = remote.options(num_cpus=spec.workers, max_retries=RETRIES, retry_exceptions=False,
+                             name=seed_key(name, spec.name, s)).remote(
+            name, spec, s, pack(result_dir), str(work), command, board)
+        refs[ref] = (seed_key(name, spec.name, s), spec.steps, result_dir)
+    return lines + collect(ray, refs, board, name, progress)
+
+
+def collect(ray, refs: dict, board, desc: str, progress: bool) -> list[str]:
+    """Wait for the tasks ``refs`` (ref: key, steps, results folder), showing their progress; write each one's
+    results as it finishes; returns their status lines, with the notes of retried seeds."""
+    bars = SeedBars({key: steps for key, steps, _ in refs.values()}, desc, progress)
+    pending, lines = list(refs), []
+    try:
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1, timeout=POLL_SECONDS)
+            state = ray.get(board.state.remote())
+            bars.show(state)
+            for ref in done:
+                key, _, result_dir = refs[ref]
+                line, files, there = outcome(ray, ref)
+                unpack(files, result_dir)
+                notes = state.get(key, {}).get("notes", [])
+                lines.append(line.replace(there, str(result_dir)) + "".join(f" ({n.split(': ', 1)[1]})" for n in notes))
+                bars.done(key)
+    except BaseException:  # Ctrl-C, or a seed that failed
+        stop(ray, pending)
+        raise
+    finally:
+        bars.close()
+    return lines
+
+
+def outcome(ray, ref):
+    """What the task ``ref`` returned; an error of its own comes out as itself, as from the local pool (a bad setting
+    is one line, not Ray's wrapper around a remote traceback)."""
+    try:
+        return ray.get(ref)
+    except ray.exceptions.RayTaskError as exc:
+        if isinstance(getattr(exc, "cause", None), Exception):
+            raise exc.cause from None
+        raise
+
+
+def stop(ray, pending: list) -> None:
+    """Cancel the tasks ``pending``: those not started never start, running ones get a KeyboardInterrupt and
+    write their checkpoint; wait (up to :data:`STOP_SECONDS`) until they have."""
+    if not pending:
+        return
+    print(f"Stopping {len(pending)} seed(s) on the cluster; each running one writes its checkpoint ...",
+          file=sys.stderr, flush=True)
+    for ref in pending:
+        ray.cancel(ref)
+    ray.wait(pending, num_returns=len(pending), timeout=STOP_SECONDS)
+
+
+def seed_nodes(ray) -> dict[str, str]:
+    """Where each seed trains (its last attempt's node id), from the boards of every ``experiments run --ray`` in
+    progress on the cluster."""
+    where: dict[str, str] = {}
+    for actor in ray.util.list_named_actors(all_namespaces=True):
+        if actor["namespace"] == NAMESPACE and actor["name"].startswith(BOARD_PREFIX):
+            try:
+                seeds = ray.get(ray.get_actor(actor["name"], namespace=NAMESPACE).state.remote())
+            except (ValueError, ray.exceptions.RayActorError):  # its command has just ended: the board goes away
+                continue
+            where.update({key: seed["attempts"][-1]["node"] for key, seed in seeds.items()})
+    return where
+
+
+def snapshot_on_ray(name: str, picks: list[tuple[RunSpec, int]], results: Path, work: Path, address: str,
+                    policy: bool = False) -> list[str]:
+    """:func:`rlbook.runner.snapshot_one` for each ``(spec, seed)`` of ``picks`` on the node where it trains
+    (:func:`seed_nodes`), its files written to ``results`` here; a seed no board knows is snapshot here."""
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+    from rlcore.provenance import command_line
+
+    ray = connect(address)
+    nodes, remote, lines = seed_nodes(ray), ray.remote(snapshot_task), []
+    for spec, s in picks:
+        node = nodes.get(seed_key(name, spec.name, s))
+        _, result_dir = run_paths(name, spec.name, s, results, work)
+        if node is None or (result_dir / "policy.pt").exists():
+            lines.append(snapshot_one(name, spec, s, results, work, policy))
+            continue
+        there = NodeAffinitySchedulingStrategy(node, soft=False)
+        line, files, tmp = outcome(ray, remote.options(num_cpus=0, scheduling_strategy=there).remote(
+            name, spec, s, pack(result_dir), str(work), command_line(), policy))
+        unpack(files, result_dir)
+        lines.append(line.replace(tmp, str(result_dir)) + f" (from node {node[:8]})")
+    return lines

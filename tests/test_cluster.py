@@ -1,0 +1,248 @@
+"""The experiment runner on a Ray cluster (rlbook.cluster), on a local cluster of two CPUs: the results are the local
+runner's bit for bit; a killed worker's seed is retried and resumes from its checkpoint; Ctrl-C on the submitting
+side cancels the tasks and leaves the seeds resumable; snapshots through Ray; without Ray, one line that says what to
+install, and the local pool as before."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+import rlbook as ex
+from portable import skip_or_fail
+from rlbook.cluster import BOARD_PREFIX, INSTALL, NAMESPACE, RAY_VERSION, Board, last_value
+
+TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
+    ex.RunSpec("ql", "q-learning", "FrozenLake-v1", 3_000, (0, 1), {"env_kwargs": {"is_slippery": False}}),
+    ex.RunSpec("dqn", "dqn", "CartPole-v1", 600, (0,), {"learning_starts": 100, "train_freq": 4, "gradient_steps": 1,
+                                                        "eval_every": 300, "hidden": [16]}),
+    # long enough to be stopped part of the way: a checkpoint every 250 steps
+    ex.RunSpec("long", "dqn", "CartPole-v1", 4_000, (0,), {"learning_starts": 100, "train_freq": 4, "gradient_steps": 1,
+                                                           "eval_every": 1_000, "hidden": [16], "checkpoint_every": 250}),
+))
+HERE = Path(__file__).parent
+
+
+def register() -> None:
+    ex.EXPERIMENTS[TINY.name] = lambda: TINY
+
+
+def driver_main(argv: list[str]) -> int:  # a submitting process, run by the tests below: `python -m rlbook ...`
+    from rlbook.__main__ import main
+
+    register()
+    return main(argv)
+
+
+def driver(argv: list[str], blocked: str = "") -> list[str]:
+    """The command line of a process that runs ``python -m rlbook`` with the test experiment (and ``blocked`` made
+    unimportable)."""
+    code = (f"import sys; sys.modules.update(dict.fromkeys({blocked.split()!r})); sys.path.insert(0, {str(HERE)!r}); "
+            f"import test_cluster as t; sys.exit(t.driver_main({argv!r}))")
+    return [sys.executable, "-c", code]
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A Ray cluster of this machine with two CPUs, and this process its driver; yields its address."""
+    try:
+        import ray
+    except ImportError:
+        skip_or_fail(f"the Ray backend's tests need Ray: {INSTALL}")
+    register()
+    info = ray.init(address="local", num_cpus=2, include_dashboard=False, namespace=NAMESPACE)
+    yield info.address_info["gcs_address"]
+    ray.shutdown()
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The local runner's results of the whole test experiment (one process, one torch thread)."""
+    register()
+    results = tmp_path_factory.mktemp("local") / "results"
+    ex.run_experiment(TINY.name, results=results, work=results.parent / "runs", progress=False)
+    return results
+
+
+def seed_files(results: Path, run: str, seed: int = 0) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted((results / TINY.name / run / f"seed-{seed}").iterdir())}
+
+
+def assert_same_training(ours: Path, theirs: Path, run: str, meta: bool = True) -> None:
+    """The same files with the same bytes, ``meta.json`` (provenance) but its start time too when ``meta``; the
+    policies' tensors equal."""
+    a, b = seed_files(ours, run), seed_files(theirs, run)
+    assert sorted(a) == sorted(b)
+    for name in a:
+        if name == "meta.json":
+            x, y = json.loads(a[name]), json.loads(b[name])
+            assert x["timing"]["wall_seconds"] > 0 and x["timing"]["cpu_seconds"] > 0
+            if meta:  # the same provenance; but when it started and how long it took
+                assert {**x, "started": None, "timing": None} == {**y, "started": None, "timing": None}
+        elif name != "policy.pt":
+            assert a[name] == b[name], (run, name)
+    x, y = (torch.load(d / TINY.name / run / "seed-0" / "policy.pt", weights_only=True) for d in (ours, theirs))
+    assert same(x, y), run
+
+
+def same(a, b) -> bool:
+    """Equal, tensors bit for bit, at any depth of dicts and lists."""
+    if isinstance(a, torch.Tensor):
+        return isinstance(b, torch.Tensor) and torch.equal(a, b)
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(same(u, v) for u, v in zip(a, b))
+    return a == b
+
+
+def test_results_are_the_local_runners_bit_for_bit(cluster, reference, tmp_path):
+    results = tmp_path / "results"
+    lines = ex.run_experiment(TINY.name, only=["ql", "dqn"], results=results, work=tmp_path / "runs", ray="auto",
+                              progress=False)
+    assert sorted(lines) == sorted(f"{TINY.name}/{run}/seed-{s}: done -> {results / TINY.name / run / f'seed-{s}'}"
+                                   for run, s in (("ql", 0), ("ql", 1), ("dqn", 0)))
+    for run in ("ql", "dqn"):
+        assert_same_training(results, reference, run)
+    meta = json.loads((results / TINY.name / "dqn" / "seed-0" / "meta.json").read_text())
+    assert meta["machine"]["torch_threads"] == 1
+    again = ex.run_experiment(TINY.name, only=["dqn"], results=results, work=tmp_path / "runs", ray="auto",
+                              progress=False)
+    assert again == [f"{TINY.name}/dqn/seed-0: already in {results / TINY.name / 'dqn' / 'seed-0'}"]
+
+
+def test_a_seeds_own_error_comes_back_as_itself(cluster, tmp_path, monkeypatch):
+    # as from the local pool: a bad setting is the library's one-line error, not Ray's wrapper of a remote traceback
+    bad = ex.Experiment("bad-cluster", "a seed that cannot start", (
+        ex.RunSpec("dqn", "dqn", "CartPole-v1", 600, (0,), {"hidden": [16], "gamma": 2.0}),))
+    monkeypatch.setitem(ex.EXPERIMENTS, bad.name, lambda: bad)
+    with pytest.raises(ValueError) as local:
+        ex.run_experiment(bad.name, results=tmp_path / "local", work=tmp_path / "runs-local", progress=False)
+    with pytest.raises(ValueError) as remote:
+        ex.run_experiment(bad.name, results=tmp_path / "results", work=tmp_path / "runs", ray="auto", progress=False)
+    assert type(remote.value) is type(local.value) and str(remote.value) == str(local.value)
+
+
+def board_state(ray) -> dict:
+    """Every seed on the boards of this cluster that are alive."""
+    seeds = {}
+    for actor in ray.util.list_named_actors(all_namespaces=True):
+        if actor["name"].startswith(BOARD_PREFIX):
+            try:
+                seeds.update(ray.get(ray.get_actor(actor["name"], namespace=NAMESPACE).state.remote()))
+            except (ValueError, ray.exceptions.RayActorError):  # the board of a finished command, going away
+                continue
+    return seeds
+
+
+def wait_for(path: Path, seconds: float = 300) -> None:
+    """Until ``path`` exists (a bound, not a pause: a loaded machine starts workers slowly)."""
+    deadline = time.monotonic() + seconds
+    while not path.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert path.exists(), f"{path} did not appear within {seconds} s"
+
+
+def test_a_killed_worker_is_retried_and_resumes_from_its_checkpoint(cluster, reference, tmp_path):
+    import ray
+
+    results, work = tmp_path / "results", tmp_path / "runs"
+    work_dir, result_dir = ex.run_paths(TINY.name, "long", 0, results, work)
+    out: dict = {}
+    thread = threading.Thread(target=lambda: out.update(lines=ex.run_experiment(
+        TINY.name, only=["long"], results=results, work=work, ray="auto", progress=False)))
+    thread.start()
+    wait_for(work_dir / "checkpoint.pt")
+    # a snapshot through Ray while the seed trains: taken on its node, written here
+    (line,) = ex.snapshot_experiment(TINY.name, only=["long"], results=results, work=work, ray="auto")
+    assert line.startswith(f"{TINY.name}/long/seed-0: snapshot at step ") and line.endswith(")"), line
+    assert json.loads((result_dir / ex.SNAPSHOT).read_text())["steps"] == 4_000
+    key, deadline = f"{TINY.name}/long/seed-0", time.monotonic() + 60
+    while key not in (seeds := board_state(ray)) and time.monotonic() < deadline:
+        time.sleep(0.05)  # the cluster's list of named actors can lag behind a moment
+    os.kill(seeds[key]["attempts"][-1]["pid"], signal.SIGKILL)
+    thread.join(timeout=300)
+    assert not thread.is_alive()
+    (line,) = out["lines"]
+    assert line.startswith(f"{TINY.name}/long/seed-0: done -> {result_dir} (its worker (pid ")
+    assert "died at" in line and "resuming from its checkpoint" in line, line
+    meta = json.loads((result_dir / "meta.json").read_text())
+    assert len(meta["resumes"]) == 1 and 0 < meta["resumes"][0]["step"] < 4_000
+    assert meta["timing"]["from_step"] == meta["resumes"][0]["step"]  # the session that finished it, timed
+    assert not (result_dir / ex.SNAPSHOT).exists()  # the finished seed replaced its snapshot
+    assert_same_training(results, reference, "long", meta=False)  # resumed between two steps: the same run
+
+
+def test_ctrl_c_cancels_the_tasks_and_leaves_the_seeds_resumable(cluster, reference, tmp_path):
+    results, work = tmp_path / "results", tmp_path / "runs"
+    work_dir, result_dir = ex.run_paths(TINY.name, "long", 0, results, work)
+    argv = ["experiments", "run", TINY.name, "--only", "long", "--ray", cluster, "--results", str(results),
+            "--runs-dir", str(work)]
+    proc = subprocess.Popen(driver(argv), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(work_dir / "checkpoint.pt")
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert "Stopping 1 seed(s) on the cluster" in err and "resume from their checkpoints" in err
+    assert (work_dir / "checkpoint.pt").exists() and not (result_dir / "policy.pt").exists()
+    import ray
+
+    # the interrupted task has ended: both of the cluster's CPUs are free again
+    assert ray.get(ray.remote(num_cpus=2)(lambda: "free").remote(), timeout=120) == "free"
+    (line,) = ex.run_experiment(TINY.name, only=["long"], results=results, work=work, ray="auto", progress=False)
+    assert line == f"{TINY.name}/long/seed-0: done -> {result_dir}"
+    assert json.loads((result_dir / "meta.json").read_text())["resumes"]
+    assert_same_training(results, reference, "long", meta=False)
+
+
+def test_without_ray_one_line_says_what_to_install_and_the_local_pool_works(tmp_path):
+    argv = ["experiments", "run", TINY.name, "--only", "ql", "--seeds", "0", "--results", str(tmp_path / "results"),
+            "--work", str(tmp_path / "runs")]
+    done = subprocess.run(driver([*argv, "--ray", "local"], blocked="ray"), capture_output=True, text=True,
+                          timeout=300)
+    errors = [line for line in done.stderr.splitlines() if not line.startswith("warning: ")]  # a dirty tree warns
+    assert done.returncode == 2 and errors == [f"error: --ray needs Ray, which is not installed here: "
+                                               f"pip install ray=={RAY_VERSION}"]
+    done = subprocess.run(driver(argv, blocked="ray"), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "results" / TINY.name / "ql" / "seed-0" / "policy.pt").exists()
+
+
+def test_the_board_says_how_a_retried_seed_goes_on():
+    # no Ray needed: the board is a plain class, which Ray runs as an actor
+    board = Board()
+    assert board.attempt("e/r/seed-0", "a" * 20, 11, None) is None  # a first attempt says nothing
+    board.report("e/r/seed-0", 1_500.0, -3.5)
+    note = board.attempt("e/r/seed-0", "b" * 20, 12, None)
+    assert note == ("e/r/seed-0: its worker (pid 11, node aaaaaaaa) died at step 1,500; retried on node bbbbbbbb, "
+                    "restarting from step 0: no checkpoint in its run folder there (the last one is on node "
+                    "aaaaaaaa; give --runs-dir on storage every node sees to resume instead)")
+    board.report("e/r/seed-0", 2_000.0, None)
+    assert board.attempt("e/r/seed-0", "b" * 20, 13, 1_750.0).endswith(
+        "died at step 2,000; retried on node bbbbbbbb, resuming from its checkpoint (logs to step 1,750)")
+    assert len(board.state()["e/r/seed-0"]["notes"]) == 2 and board.state()["e/r/seed-0"]["step"] == 2_000.0
+
+
+def test_last_value_reads_the_last_row_of_a_log(tmp_path):
+    log = tmp_path / "progress.csv"
+    assert last_value(log, "step") is None
+    log.write_text("episode,step,episode_return\n")
+    assert last_value(log, "step") is None
+    log.write_text("episode,step,episode_return\n" + "".join(f"{i},{20 * i},{i}.5\n" for i in range(1, 2_000)))
+    assert last_value(log, "step") == 39_980 and last_value(log, "episode_return") == 1_999.5
+    assert last_value(log, "no-such-column") is None
+
+
+def test_the_pinned_ray_is_the_one_requirements_install():
+    pins = [line.split("#")[0].strip() for line in (HERE.parent / "requirements.txt").read_text().splitlines()]
+    assert f"ray=={RAY_VERSION}" in pins
