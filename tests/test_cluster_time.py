@@ -37,7 +37,9 @@ def test_seed_costs_of_the_stored_records():
     for r in costs:
         spec = next(s for s in get_experiment(r["experiment"]).runs if s.name == r["run"])
         assert (r["seeds"], r["cores"], r["steps"]) == (len(spec.seeds), spec.workers, spec.steps)
-        assert 0 < r["hours"] < 100 and r["source"].split(" ")[0].endswith(".json")
+        # a benchmark record's estimate, or the seeds' own wall time where they recorded it
+        assert 0 < r["hours"] < 100 and (r["source"].split(" ")[0].endswith(".json")
+                                         or r["source"].startswith("its "))
     longest = max(costs, key=lambda r: r["hours"])
     assert (longest["experiment"], longest["run"]) == ("ddpg-report-humanoid", "large")
 
