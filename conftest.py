@@ -100,9 +100,14 @@ def _chapter_notebook_class():
             import jupytext
             import nbformat
 
+            notebook = jupytext.read(self.path)
+            # Every pytest-xdist process collects every chapter: each writes the copy atomically (a temporary file
+            # of its own, then a rename), so none ever sees another's half-written file.
             ipynb = NBVAL_DIR / f"{self.path.stem}.ipynb"
             NBVAL_DIR.mkdir(parents=True, exist_ok=True)
-            nbformat.write(jupytext.read(self.path), ipynb)
+            partial = ipynb.with_name(f".{ipynb.name}.{os.getpid()}")
+            nbformat.write(notebook, partial)
+            os.replace(partial, ipynb)
 
             # nbval's collect() reads the notebook with nbformat.read(self.fspath); give it the
             # converted copy instead of the Markdown source.

@@ -31,8 +31,9 @@ def tiny_ppo(tmp_path_factory):
 def test_final_policies_evaluated_again_reproduce_the_last_logged_evaluation(tiny_ppo):
     finals = final_policy_returns(tiny_ppo, episodes=2)
     assert finals.shape == (2,)
-    # same policy, same start states (seed + 10,000 + i), same machine: the same returns as eval.csv's last row
-    np.testing.assert_allclose(finals, ex.final_returns(tiny_ppo), rtol=1e-9)
+    # same policy, same start states (seed + 10,000 + i): the returns of eval.csv's last row. Under other kernels
+    # (ATEN_CPU_CAPABILITY=default) the two evaluations round apart in the 9th digit (1.9e-9 seen), hence 1e-6
+    np.testing.assert_allclose(finals, ex.final_returns(tiny_ppo), rtol=1e-6)
     assert final_policy_returns(tiny_ppo, episodes=2) is finals           # computed once
     assert not np.array_equal(final_policy_returns(tiny_ppo, episodes=1), finals)
 
