@@ -12,7 +12,8 @@
   :func:`deterministic_policy`: what every on-policy ``train`` does around its loop;
 - :func:`saved_policy`: the deterministic policy a checkpoint holds (what every ``load_policy`` here returns).
 
-- :class:`OnPolicyConfig`: the fields the three share, which the functions here read.
+- :class:`PolicyGradientConfig`: the fields every policy-gradient method here shares (REINFORCE too);
+  :class:`OnPolicyConfig`: those A2C, PPO and DPPO add, which the functions here read.
 """
 
 from __future__ import annotations
@@ -33,36 +34,18 @@ ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
 
 
 @dataclass
-class OnPolicyConfig:
-    """What A2C, PPO and DPPO share: the vectorized environments and their normalization, the discount and GAE, the
-    optimizer's step size and the loss's weights, the actor-critic's shape, evaluation and checkpoints. The defaults
-    are A2C's (Stable-Baselines3's, RL Zoo's CartPole-v1 settings); :class:`rlcore.ppo.Config` sets the PPO paper's
-    where they differ."""
+class PolicyGradientConfig:
+    """What every policy-gradient method here shares (REINFORCE, A2C, PPO, DPPO): the discount, the step size, the
+    entropy bonus and gradient clipping, the networks' shape, evaluation and checkpoints. The defaults are A2C's."""
 
-    num_envs: int = 8
-    """Environments stepped in parallel (a Gymnasium vector environment); A3C's parallel actors."""
-    n_steps: int = 5
-    """Steps per environment per iteration: returns look at most this far ahead (A3C's t_max)."""
     gamma: float = 0.99
     """Discount factor."""
-    gae_lambda: float = 1.0
-    """GAE's lambda; 1.0 gives plain n-step returns minus V (A3C), smaller values trade variance for bias."""
     learning_rate: float = 7e-4
     """Step size (one optimizer for actor and critic)."""
-    anneal_lr: bool = False
-    """Decay the step size linearly to 0 over the run."""
     ent_coef: float = 0.0
     """Entropy bonus weight (A3C used 0.01 on Atari)."""
-    vf_coef: float = 0.5
-    """Value-loss weight."""
     max_grad_norm: float = 0.5
     """Clip the gradient's global norm to this."""
-    normalize_advantage: bool = False
-    """Standardize the advantages of each rollout (off in A3C and SB3's A2C)."""
-    normalize_obs: bool = False
-    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
-    normalize_reward: bool = False
-    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
     hidden: tuple[int, ...] = (64, 64)
     """Hidden layers of the actor and of the critic (separate networks) [the PPO report's hidden-size]."""
     activation: str = "tanh"
@@ -72,11 +55,11 @@ class OnPolicyConfig:
     log_std_init: float = 0.0
     """Initial log standard deviation of the Gaussian policy (continuous actions)."""
     eval_every: int = 10_000
-    """Evaluate the deterministic policy after the first iteration past every this many steps (0: never)."""
+    """Evaluate the deterministic policy after the first update past every this many steps (0: never)."""
     eval_episodes: int = 5
     """Episodes per evaluation."""
     checkpoint_every: int = 50_000
-    """Write checkpoint.pt after the first iteration past every this many steps (and at the end, and on Ctrl-C)."""
+    """Write checkpoint.pt after the first update past every this many steps (and at the end, and on Ctrl-C)."""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments for ``gymnasium.make``."""
 
@@ -84,6 +67,30 @@ class OnPolicyConfig:
         check_config(self)
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
+
+
+@dataclass
+class OnPolicyConfig(PolicyGradientConfig):
+    """What A2C, PPO and DPPO share besides :class:`PolicyGradientConfig`'s fields: the vectorized environments and
+    their normalization, GAE, the loss's weights. The defaults are A2C's (Stable-Baselines3's, RL Zoo's CartPole-v1
+    settings); :class:`rlcore.ppo.Config` sets the PPO paper's where they differ."""
+
+    num_envs: int = 8
+    """Environments stepped in parallel (a Gymnasium vector environment); A3C's parallel actors."""
+    n_steps: int = 5
+    """Steps per environment per iteration: returns look at most this far ahead (A3C's t_max)."""
+    gae_lambda: float = 1.0
+    """GAE's lambda; 1.0 gives plain n-step returns minus V (A3C), smaller values trade variance for bias."""
+    anneal_lr: bool = False
+    """Decay the step size linearly to 0 over the run."""
+    vf_coef: float = 0.5
+    """Value-loss weight."""
+    normalize_advantage: bool = False
+    """Standardize the advantages of each rollout (off in A3C and SB3's A2C)."""
+    normalize_obs: bool = False
+    """Running mean/std observation normalization (Gymnasium's NormalizeObservation), clipped to +-10."""
+    normalize_reward: bool = False
+    """Scale rewards by a running std of the discounted return (Gymnasium's NormalizeReward), clipped to +-10."""
 
 
 def normalize(x: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:

@@ -16,7 +16,7 @@ last steps' returns are too small (on CartPole-v1 the 500-step limit cuts the be
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,10 +25,10 @@ import torch
 from torch import nn
 
 from rlcore.a2c import Result, entropy_bonus, make_optimizer, policy_gradient_loss  # Result: A2C's fields
-from rlcore.config import AT_LEAST_ONE, check_budget, check_config
+from rlcore.config import AT_LEAST_ONE, check_budget
 from rlcore.envs import make_env
 from rlcore.harness import Evaluation, Run, evaluation, torch_rng
-from rlcore.onpolicy import (ACTIVATIONS, OBS_CLIP, ActorCritic, ActorCriticPolicy, check_spaces,
+from rlcore.onpolicy import (OBS_CLIP, ActorCritic, ActorCriticPolicy, PolicyGradientConfig, check_spaces,
                              deterministic_policy, make_agent, saved_policy)
 
 POLICY_KEYS = ("agent", "spaces", "obs_clip")
@@ -36,50 +36,25 @@ POLICY_KEYS = ("agent", "spaces", "obs_clip")
 
 
 @dataclass
-class Config:
-    """Hyperparameters of REINFORCE; every field it shares with :class:`rlcore.a2c.Config` has A2C's default."""
+class Config(PolicyGradientConfig):
+    """Hyperparameters of REINFORCE. The fields every policy-gradient method shares are
+    :class:`rlcore.onpolicy.PolicyGradientConfig`'s, with A2C's defaults; these are its own (the optimizer's as A2C's)."""
 
     batch_steps: int = 40
     """Collect whole episodes until at least this many steps, then take one gradient step (A2C: 8 x 5 = 40)."""
-    gamma: float = 0.99
-    """Discount factor."""
-    learning_rate: float = 7e-4
-    """Step size."""
     optimizer: str = "rmsprop"
     """``"rmsprop"`` or ``"adam"``, as in A2C."""
     rms_alpha: float = 0.99
     """RMSprop's smoothing constant of the squared-gradient average."""
     optimizer_eps: float = 1e-5
     """The optimizer's epsilon."""
-    ent_coef: float = 0.0
-    """Entropy bonus weight."""
-    max_grad_norm: float = 0.5
-    """Clip the gradient's global norm to this."""
     normalize_returns: bool = False
     """Standardize the returns of each batch (a baseline in disguise: the batch's mean return is subtracted)."""
-    hidden: tuple[int, ...] = (64, 64)
-    """Hidden layers of the actor (the agent's critic network is built, as A2C's, but never trained or used)."""
-    activation: str = "tanh"
-    """Hidden-layer nonlinearity: ``"tanh"`` or ``"relu"``."""
-    ortho_init: bool = True
-    """Orthogonal initialization with a small last policy layer, as A2C."""
-    log_std_init: float = 0.0
-    """Initial log standard deviation of the Gaussian policy (continuous actions)."""
-    eval_every: int = 10_000
-    """Evaluate the deterministic policy after the first update past every this many steps (0: never)."""
-    eval_episodes: int = 5
-    """Episodes per evaluation."""
-    checkpoint_every: int = 50_000
-    """Write checkpoint.pt after the first update past every this many steps (and at the end, and on Ctrl-C)."""
-    env_kwargs: dict[str, Any] = field(default_factory=dict)
-    """Keyword arguments for ``gymnasium.make``."""
 
     RANGES = {"batch_steps": AT_LEAST_ONE}
 
     def __post_init__(self) -> None:
-        check_config(self)
-        if self.activation not in ACTIVATIONS:
-            raise ValueError(f"activation must be one of {tuple(ACTIVATIONS)}, got {self.activation!r}")
+        super().__post_init__()
         if self.optimizer not in ("rmsprop", "adam"):
             raise ValueError(f"optimizer must be one of ('rmsprop', 'adam'), got {self.optimizer!r}")
 
