@@ -7,7 +7,7 @@ say where each setting comes from (the course report's tables, the RL Zoo, the p
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +29,9 @@ class RunSpec:
     """A longer legend label (default: ``name``)."""
     workers: int = 1
     """Worker processes of a distributed algorithm (``dppo``), started by torchrun; 1 for every other algorithm."""
+    continues: str | None = None
+    """``"EXPERIMENT/RUN"``: each seed starts from that run's same seed, finished (its checkpoint with the replay
+    memory, and its logs), and trains on to ``steps``: the same run resumed with a larger budget, not a new one."""
 
 
 @dataclass(frozen=True)
@@ -395,6 +398,19 @@ def _td3_ablation() -> Experiment:
     )
 
 
+def _td3_sac_humanoid_2m() -> Experiment:
+    # If a million steps give a humanoid that stands but does not walk, the chosen seed trains on to 2M: td3-sac-1m's
+    # seed, resumed from its finished checkpoint (replay memory included) with a larger budget and the same settings.
+    source = {spec.name: spec for spec in _td3_sac_1m().runs}
+    return Experiment(
+        "td3-sac-humanoid-2m",
+        "td3-sac-1m's Humanoid seeds trained on from 1M to 2M steps (each seed resumed from its finished run)",
+        tuple(replace(source[name], name=f"{name}-2m", steps=2_000_000, continues=f"td3-sac-1m/{name}",
+                      label=f"{source[name].label}, continued to 2M steps")
+              for name in ("td3-humanoid", "sac-humanoid")),
+    )
+
+
 EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "dqn-cartpole": _dqn_cartpole,
     "dqn-lunarlander": _dqn_lunarlander,
@@ -405,12 +421,13 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "ddpg-modern": _ddpg_modern,
     "ddpg-modern-1m": _ddpg_modern_1m,
     "ppo-report-hopper": _ppo_report_hopper,
-    "ppo-report-halfcheetah-literal": _ppo_report_halfcheetah_literal,   # issue 35, pending
-    "dppo-halfcheetah-one-worker": _dppo_halfcheetah_one_worker,         # issue 35, pending
+    "ppo-report-halfcheetah-literal": _ppo_report_halfcheetah_literal,
+    "dppo-halfcheetah-one-worker": _dppo_halfcheetah_one_worker,
     "ppo-report-halfcheetah": _ppo_report_halfcheetah,
     "dppo-halfcheetah": _dppo_halfcheetah,
     "td3-sac-1m": _td3_sac_1m,
     "td3-ablation": _td3_ablation,
+    "td3-sac-humanoid-2m": _td3_sac_humanoid_2m,
 }
 
 

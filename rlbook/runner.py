@@ -64,6 +64,8 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
     work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
     if (result_dir / "policy.pt").exists():
         return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
+    if spec.continues and not (work_dir / "checkpoint.pt").exists():
+        start_from(spec, seed, work_dir, results or paths.results_dir(), work or paths.work_dir())
     started = (time.perf_counter(), cpu_seconds())
     if spec.algo == "dppo":  # one process per worker, started by torchrun; each worker with one torch thread
         run_torchrun(distributed_command(spec, seed, work_dir), {**os.environ, "OMP_NUM_THREADS": "1"})
@@ -77,6 +79,26 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
     for name in (SNAPSHOT, SNAPSHOT_POLICY):  # the finished seed replaces its in-progress snapshot
         (result_dir / name).unlink(missing_ok=True)
     return f"{exp}/{spec.name}/seed-{seed}: done -> {result_dir}"
+
+
+def start_from(spec: RunSpec, seed: int, work_dir: Path, results: Path, work: Path) -> None:
+    """Copy the finished seed that ``spec`` continues (``spec.continues``, its checkpoint and logs) into
+    ``work_dir``, from where ``train`` resumes it with ``spec``'s larger budget; its record says so."""
+    exp, run = spec.continues.split("/")
+    source = next(s for s in get_experiment(exp).runs if s.name == run)
+    source_work, source_results = run_paths(exp, run, seed, results, work)
+    if not (source_results / "policy.pt").exists() or not (source_work / "checkpoint.pt").exists():
+        raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is not finished in "
+                         f"{source_work}: finish it first with `python -m rlbook experiments run {exp} --only {run} "
+                         f"--seeds {seed}`")
+    if source.overrides != spec.overrides or source.algo != spec.algo or source.env_id != spec.env_id:
+        raise ValueError(f"{spec.name} continues {exp}/{run} with other settings; a continued run keeps them all")
+    work_dir.mkdir(parents=True, exist_ok=True)
+    for f in source_work.iterdir():
+        if f.is_file():
+            shutil.copy2(f, work_dir / f.name)
+    (work_dir / CONTINUED).write_text(json.dumps({"continues": spec.continues, "seed": seed,
+                                                 "from_step": source.steps}, indent=2) + "\n")
 
 
 def cpu_seconds() -> float:
@@ -111,8 +133,12 @@ def run_torchrun(cmd: list[str], env: dict[str, str]) -> None:
         raise subprocess.CalledProcessError(code, cmd)
 
 
-LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv", "alpha.csv")
-"""What a seed's results folder holds besides ``policy.pt``: settings, provenance and the logs (SAC's temperature in ``alpha.csv``)."""
+LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv", "alpha.csv", "continued.json")  # CONTINUED
+"""What a seed's results folder holds besides ``policy.pt``: settings, provenance and the logs (SAC's temperature in
+``alpha.csv``; for a seed that continues another run's, :data:`CONTINUED`)."""
+
+CONTINUED = "continued.json"
+"""Beside a seed that continues another run's: which run, and the step it started from."""
 
 SNAPSHOT = "snapshot.json"
 """In a results folder without ``policy.pt``: the seed is still training, and these are its logs so far."""

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import torch
 
 import pytest
 
@@ -390,6 +391,11 @@ def test_td3_and_sac_experiments_compare_like_with_like():
     ablation = {r.name: r for r in get_experiment("td3-ablation").runs}
     assert {r.env_id for r in ablation.values()} == {"Hopper-v5"} and all(len(r.seeds) == 5 for r in ablation.values())
     assert ablation["none"].overrides["policy_delay"] == 1 and not ablation["none"].overrides["clipped_double_q"]
+    for longer in get_experiment("td3-sac-humanoid-2m").runs:  # the same seeds, trained on with the same settings
+        source = runs[longer.continues.split("/")[1]]
+        assert longer.continues.startswith("td3-sac-1m/") and longer.steps == 2 * source.steps
+        assert (longer.algo, longer.env_id, longer.overrides, longer.seeds) == (source.algo, source.env_id,
+                                                                                source.overrides, source.seeds)
 
 
 def test_an_interrupt_stops_the_torchrun_job_and_waits_for_it(tmp_path):
@@ -414,3 +420,40 @@ def test_an_interrupt_stops_the_torchrun_job_and_waits_for_it(tmp_path):
     assert stopped.exists()  # the job got the SIGINT and had ended when the interrupt came out
     with pytest.raises(subprocess.CalledProcessError):
         run_torchrun([sys.executable, "-c", "raise SystemExit(5)"], dict(os.environ))
+
+
+def test_a_continued_run_is_its_source_run_trained_on(monkeypatch, tmp_path):
+    # td3-sac-humanoid-2m's mechanism on a tiny TD3: a seed that continues a finished run resumes it (checkpoint,
+    # replay memory, logs) with a larger budget, and ends where one run with that budget from the start ends
+    from dataclasses import replace
+
+    from rlcore.checkpoint import load_checkpoint
+
+    base = ex.RunSpec("short", "td3", "Pendulum-v1", 400, (0,), {"learning_starts": 100, "hidden": (16,),
+                                                                 "batch_size": 32, "eval_every": 200,
+                                                                 "eval_episodes": 1, "checkpoint_every": 200})
+    exp = ex.Experiment("tiny-td3", "a test experiment", (
+        base, replace(base, name="long", steps=800, continues="tiny-td3/short"), replace(base, name="direct", steps=800)))
+    monkeypatch.setitem(ex.EXPERIMENTS, "tiny-td3", lambda: exp)
+    results, work = tmp_path / "results", tmp_path / "runs"
+    with pytest.raises(ValueError, match="not finished"):  # the source seed must be finished first
+        ex.run_experiment("tiny-td3", only=["long"], results=results, work=work, progress=False)
+    assert not (work / "tiny-td3" / "long").exists()
+    ex.run_experiment("tiny-td3", only=["short"], results=results, work=work, progress=False)
+    ex.run_experiment("tiny-td3", only=["long"], results=results, work=work, progress=False)
+    ex.run_experiment("tiny-td3", only=["direct"], results=results, work=work, progress=False)
+    seed = {name: results / "tiny-td3" / name / "seed-0" for name in ("short", "long", "direct")}
+    assert json.loads((seed["long"] / "continued.json").read_text()) == {"continues": "tiny-td3/short", "seed": 0,
+                                                                         "from_step": 400}
+    evals = {name: (folder / "eval.csv").read_text().splitlines() for name, folder in seed.items()}
+    assert evals["long"][:len(evals["short"])] == evals["short"]  # the source's curve, then more of it
+    assert evals["long"] == evals["direct"] and len(evals["long"]) == 1 + 4
+    long, direct = (load_checkpoint(seed[n] / "policy.pt") for n in ("long", "direct"))
+    assert long["step"] == direct["step"] == 800
+    for key, tensor in direct["actor"].items():
+        assert torch.equal(long["actor"][key], tensor), key
+    # a continued run keeps its source's settings
+    other = replace(base, name="other", steps=800, continues="tiny-td3/short", overrides={**base.overrides, "tau": 0.01})
+    monkeypatch.setitem(ex.EXPERIMENTS, "tiny-td3", lambda: replace(exp, runs=(*exp.runs, other)))
+    with pytest.raises(ValueError, match="other settings"):
+        ex.run_experiment("tiny-td3", only=["other"], results=results, work=work, progress=False)
