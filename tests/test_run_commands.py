@@ -26,8 +26,8 @@ def test_set_args_are_read_back_as_the_same_overrides():
 def test_train_command_sets_only_what_differs_from_the_defaults():
     config = A2CConfig(n_steps=8, gamma=0.9, normalize_obs=True)
     line = train_command("a2c", "Pendulum-v1", 300_000, 2, config)
-    assert line == ("python -m rlcore train a2c --env Pendulum-v1 --steps 300000 --seed 2 --set n_steps=8 "
-                    "--set gamma=0.9 --set normalize_obs=true")
+    assert line == ("python -m rlcore train a2c --env Pendulum-v1 --steps 300000 --seed 2 --set gamma=0.9 "
+                    "--set n_steps=8 --set normalize_obs=true")  # in the Config's field order
     assert train_command("a2c", "CartPole-v1", 40_000, 0, A2CConfig()).endswith("--seed 0")
 
 
