@@ -61,11 +61,12 @@ def train_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None, w
     from rlcore.machine import torch_threads
 
     torch_threads()  # one per process unless RLCORE_TORCH_THREADS says more (one long run on an idle machine)
-    work_dir, result_dir = run_paths(exp, spec.name, seed, results or paths.results_dir(), work or paths.work_dir())
+    results, work = results or paths.results_dir(), work or paths.work_dir()
+    work_dir, result_dir = run_paths(exp, spec.name, seed, results, work)
     if (result_dir / "policy.pt").exists():
         return f"{exp}/{spec.name}/seed-{seed}: already in {result_dir}"
     if spec.continues and not (work_dir / "checkpoint.pt").exists():
-        start_from(spec, seed, work_dir, results or paths.results_dir(), work or paths.work_dir())
+        start_from(spec, seed, work_dir, results, work)
     started = (time.perf_counter(), cpu_seconds())
     if spec.algo == "dppo":  # one process per worker, started by torchrun; each worker with one torch thread
         run_torchrun(distributed_command(spec, seed, work_dir), {**os.environ, "OMP_NUM_THREADS": "1"})
@@ -85,7 +86,7 @@ def start_from(spec: RunSpec, seed: int, work_dir: Path, results: Path, work: Pa
     """Copy the finished seed that ``spec`` continues (``spec.continues``, its checkpoint and logs) into
     ``work_dir``, from where ``train`` resumes it with ``spec``'s larger budget; its record says so."""
     exp, run = spec.continues.split("/")
-    source = next(s for s in get_experiment(exp).runs if s.name == run)
+    (source,) = chosen_runs(exp, [run])
     source_work, source_results = run_paths(exp, run, seed, results, work)
     if not (source_results / "policy.pt").exists() or not (source_work / "checkpoint.pt").exists():
         raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is not finished in "
@@ -133,12 +134,12 @@ def run_torchrun(cmd: list[str], env: dict[str, str]) -> None:
         raise subprocess.CalledProcessError(code, cmd)
 
 
-LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv", "alpha.csv", "continued.json")  # CONTINUED
-"""What a seed's results folder holds besides ``policy.pt``: settings, provenance and the logs (SAC's temperature in
-``alpha.csv``; for a seed that continues another run's, :data:`CONTINUED`)."""
-
 CONTINUED = "continued.json"
 """Beside a seed that continues another run's: which run, and the step it started from."""
+
+LOGS = ("config.json", "meta.json", "progress.csv", "eval.csv", "alpha.csv", CONTINUED)
+"""What a seed's results folder holds besides ``policy.pt``: settings, provenance and the logs (SAC's temperature in
+``alpha.csv``; for a seed that continues another run's, :data:`CONTINUED`)."""
 
 SNAPSHOT = "snapshot.json"
 """In a results folder without ``policy.pt``: the seed is still training, and these are its logs so far."""

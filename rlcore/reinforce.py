@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from rlcore.a2c import Result, entropy_bonus, make_optimizer, policy_gradient_loss  # Result: A2C's fields
+from rlcore.a2c import OPTIMIZERS, Result, entropy_bonus, make_optimizer, policy_gradient_loss  # Result: A2C's fields
 from rlcore.config import AT_LEAST_ONE, check_budget
 from rlcore.envs import make_env
 from rlcore.harness import Evaluation, Run, evaluation, torch_rng
@@ -38,7 +38,8 @@ POLICY_KEYS = ("agent", "spaces", "obs_clip")
 @dataclass
 class Config(PolicyGradientConfig):
     """Hyperparameters of REINFORCE. The fields every policy-gradient method shares are
-    :class:`rlcore.onpolicy.PolicyGradientConfig`'s, with A2C's defaults; these are its own (the optimizer's as A2C's)."""
+    :class:`rlcore.onpolicy.PolicyGradientConfig`'s, with A2C's defaults (of ``hidden``'s two networks only the actor
+    is trained: the critic is built, as A2C's, but never used); these are its own (the optimizer's as A2C's)."""
 
     batch_steps: int = 40
     """Collect whole episodes until at least this many steps, then take one gradient step (A2C: 8 x 5 = 40)."""
@@ -55,8 +56,8 @@ class Config(PolicyGradientConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.optimizer not in ("rmsprop", "adam"):
-            raise ValueError(f"optimizer must be one of ('rmsprop', 'adam'), got {self.optimizer!r}")
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
 
 
 # --- the math ----------------------------------------------------------------------------------
