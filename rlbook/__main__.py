@@ -40,7 +40,7 @@ def cmd_experiments(args: argparse.Namespace) -> int:
         chosen = {spec.name for spec in ex.chosen_runs(args.name, args.only)}
         for run_name, run in ex.load_experiment(args.name, results).items():
             if run.seeds and run_name in chosen:
-                for path in store_final_policy_returns(run, episodes=args.episodes):
+                for path in store_final_policy_returns(run, episodes=args.episodes, seeds=args.seeds):
                     print(f"Wrote {path}")
         return 0
     if args.action == "snapshot":
@@ -66,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
     x.add_argument("action", choices=["list", "run", "status", "reevaluate", "snapshot"],
-                   help="reevaluate: evaluate each finished seed's final policy and store its returns in results/; "
+                   help="reevaluate: evaluate each finished seed's (each of --seeds') final policy and store its returns in results/; "
                         "snapshot: copy the logs so far of seeds still training to results/ (with --policy, the "
                         "policy of their last checkpoint too)")
     x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")

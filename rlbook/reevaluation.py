@@ -23,7 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -130,17 +130,20 @@ def final_policy_returns(run: RunResults, episodes: int = 5) -> np.ndarray:
     return _FINALS[key]
 
 
-def store_final_policy_returns(run: RunResults, episodes: int = 5) -> list[Path]:
-    """Evaluate every seed's final policy now as :func:`final_policy_episodes` does and store it
-    (``seed-<s>/final-policy-returns.json``); the paths written."""
+def store_final_policy_returns(run: RunResults, episodes: int = 5,
+                               seeds: Sequence[int] | None = None) -> list[Path]:
+    """Evaluate the final policy of every finished seed (of ``seeds`` only, if given) now as
+    :func:`final_policy_episodes` does and store it (``seed-<s>/final-policy-returns.json``); the paths written.
+    Other seeds' stored files are left as they are."""
     if run.source != "results":
         raise ValueError(f"{run.spec.name}: only finished runs in results/ have stored re-evaluations")
-    for s in run.seeds:
+    chosen = [s for s in run.seeds if seeds is None or s.seed in seeds]
+    for s in chosen:
         path = s.folder / f"{FINAL}.json"
         path.unlink(missing_ok=True)
         _final_episodes(s, run.spec.env_id, run.spec.overrides.get("env_kwargs", {}), episodes, write=True)
     _FINALS.clear()
-    return [s.folder / f"{FINAL}.json" for s in run.seeds]
+    return [s.folder / f"{FINAL}.json" for s in chosen]
 
 
 def trained_before_clipping_fix(run: RunResults) -> np.ndarray:

@@ -115,6 +115,15 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
                  str(tmp_path / "results")]) == 2
     assert "tiny-ppo has no run 'nope'; its runs: ppo." in capsys.readouterr().err
 
+    # --seeds: only the chosen seed's file is written again; the other seed's stays byte for byte
+    other = run.seeds[1].folder / (reevaluation.FINAL + '.json')
+    before = other.read_bytes()
+    assert main(["experiments", "reevaluate", "tiny-ppo", "--seeds", str(run.seeds[0].seed), "--episodes", "2",
+                 "--results", str(tmp_path / "results")]) == 0
+    assert capsys.readouterr().out.count(reevaluation.FINAL + '.json') == 1
+    assert other.read_bytes() == before
+    assert json.loads(path.read_text())["records"][0]["params"]["episodes"] == 2
+
 
 def test_stored_computes_once_writes_only_when_asked_and_reads_back_the_same_params(tiny_ppo, tmp_path, monkeypatch):
     import json
