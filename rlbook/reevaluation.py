@@ -100,6 +100,32 @@ def stored_reward_anatomy(s: SeedResult, env_id: str, episodes: int, first_reset
     return stored(s, "reward-anatomy", params, lambda: reward_anatomy(s.policy, env_id, episodes, seed=first_reset_seed))
 
 
+def fresh_iqm_rows(arms: dict[str, RunResults], episodes: int = 10, first_reset_seed: int = 20_000,
+                   min_seeds: int = 3) -> list[dict[str, str]]:
+    """One table row per algorithm (label -> run): each finished seed's final policy on ``episodes`` fresh episodes
+    (:func:`stored_returns`, seed ``s`` from ``reset(seed=first_reset_seed + s + i)``), its mean as the seed's score,
+    and the interquartile mean over seeds with its 95 % bootstrap interval (:func:`rlbook.analysis.iqm_ci`) and the
+    lowest seed. An arm with fewer than ``min_seeds`` finished seeds is listed without a summary, saying how many
+    it has: no IQM is drawn from fewer."""
+    from rlbook.analysis import iqm_ci
+
+    rows = []
+    for label, run in arms.items():
+        scores = np.array([stored_returns(s, run.spec.env_id, episodes, first_reset_seed + s.seed).mean()
+                           for s in run.seeds])
+        row = {"algorithm": label, "task": run.spec.env_id, "steps": f"{run.spec.steps:,}",
+               "finished seeds": f"{len(scores)} of {len(run.spec.seeds)}"}
+        if len(scores) >= min_seeds:
+            iqm, low, high = iqm_ci({label: scores})[label]
+            row |= {f"IQM over seeds (mean of {episodes} fresh episodes each)": f"{iqm:,.0f}",
+                    "95 % interval": f"{low:,.0f} to {high:,.0f}", "lowest seed": f"{scores.min():,.0f}"}
+        else:
+            row |= {f"IQM over seeds (mean of {episodes} fresh episodes each)": f"waits for {min_seeds} seeds",
+                    "95 % interval": "—", "lowest seed": "—"}
+        rows.append(row)
+    return rows
+
+
 def _final_episodes(s: SeedResult, env_id: str, env_kwargs: dict[str, Any], episodes: int,
                     write: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
     params = {"episodes": episodes, "first_reset_seed": s.seed + 10_000,

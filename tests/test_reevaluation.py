@@ -154,3 +154,19 @@ def _pendulum():
     from rlcore.envs import make_env
 
     return make_env("Pendulum-v1")
+
+
+def test_fresh_iqm_rows_summarize_seeds_only_when_there_are_enough(tiny_ppo):
+    from rlbook.analysis import iqm_ci
+    from rlbook.reevaluation import fresh_iqm_rows, stored_returns
+
+    (row,) = fresh_iqm_rows({"PPO": tiny_ppo}, episodes=2, min_seeds=2)
+    scores = np.array([stored_returns(s, "Pendulum-v1", 2, 20_000 + s.seed).mean() for s in tiny_ppo.seeds])
+    assert not np.isclose(scores[0], scores[1])                   # two seeds, two scores
+    iqm, low, high = iqm_ci({"PPO": scores})["PPO"]
+    assert row["finished seeds"] == "2 of 2" and row["steps"] == "256" and row["task"] == "Pendulum-v1"
+    assert row["IQM over seeds (mean of 2 fresh episodes each)"] == f"{iqm:,.0f}"
+    assert row["95 % interval"] == f"{low:,.0f} to {high:,.0f}" and row["lowest seed"] == f"{scores.min():,.0f}"
+    (waiting,) = fresh_iqm_rows({"PPO": tiny_ppo}, episodes=2, min_seeds=3)
+    assert waiting["IQM over seeds (mean of 2 fresh episodes each)"] == "waits for 3 seeds"
+    assert waiting["lowest seed"] == "—"
