@@ -66,9 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     x = sub.add_parser("experiments", help="the book's full-budget experiments (resumable)")
     x.add_argument("action", choices=["list", "run", "status", "reevaluate", "snapshot"],
-                   help="reevaluate: evaluate each finished seed's (each of --seeds') final policy and store its returns in results/; "
-                        "snapshot: copy the logs so far of seeds still training to results/ (with --policy, the "
-                        "policy of their last checkpoint too)")
+                   help="reevaluate: evaluate each finished seed's (each of --seeds') final policy and store its "
+                        "returns in results/; snapshot: copy the logs so far of seeds still training to results/ "
+                        "(with --policy, the policy of their last checkpoint too)")
     x.add_argument("name", nargs="?", help="experiment name (see `experiments list`)")
     x.add_argument("--jobs", type=count(1), help="runs in parallel, one process each (one per core; default 1); "
                                                   "with --ray local, the CPUs of the local cluster (default all)")
