@@ -6,7 +6,7 @@ A return is one number; these measurements say what earned it (chapter 5 uses th
 - :func:`pitch_rollout`: one episode with the torso's pitch angle at every step, to see a cheetah turn over
   (:attr:`Episode.on_back`, :attr:`Episode.first_flip`), and optionally some of its frames;
 - :func:`reward_anatomy`: a return split into the terms Gymnasium reports in ``info``, with falls and
-  actions at their bounds, and :func:`anatomy_row` to show one as a table row;
+  actions at their bounds, :func:`anatomy_row` to show one as a table row and :func:`plot_anatomy` as bars;
 - :func:`fall_share`: how many of a run's late training episodes ended in a fall;
 - :func:`observation_scales` and :data:`HUMANOID_V5_OBSERVATION`: the size of each part of an observation;
 - :func:`tanh_saturation`: how many of a fresh actor's outputs sit where its final tanh is flat.
@@ -169,6 +169,26 @@ def forward_velocity(anatomy: Mapping[str, float], env_id: str) -> float:
 def forward_share(anatomy: Mapping[str, float]) -> float:
     """The share of the return earned by moving forward (the forward reward over the return)."""
     return float(anatomy["reward_forward"]) / float(anatomy["return"])
+
+
+def plot_anatomy(ax: Any, anatomies: Mapping[str, Mapping[str, float]], env_id: str) -> None:
+    """One horizontal bar per anatomy (label -> :func:`reward_anatomy` result) on ``ax``, split into its terms: what
+    staying healthy earned and what moving forward earned to the right of 0, the control and contact costs to the
+    left, and the mean forward velocity written at the bar's end. The first label is drawn at the top."""
+    labels = list(anatomies)
+    y = -np.arange(len(labels))
+    survive = np.array([anatomies[k]["reward_survive"] for k in labels])
+    forward = np.array([anatomies[k]["reward_forward"] for k in labels])
+    costs = np.array([anatomies[k]["reward_ctrl"] + anatomies[k]["reward_contact"] for k in labels])
+    ax.barh(y, survive, color="0.72", label="staying healthy")
+    ax.barh(y, forward, left=survive, color="tab:blue", label="moving forward")
+    ax.barh(y, costs, color="tab:red", label="control and contact costs")
+    for yi, label, end in zip(y, labels, survive + np.maximum(forward, 0)):
+        ax.text(end, yi, f" {forward_velocity(anatomies[label], env_id):.2f} m/s", va="center", fontsize=8)
+    ax.set_yticks(y, labels)
+    ax.set_xlim(1.1 * min(costs.min(), 0), 1.15 * (survive + np.maximum(forward, 0)).max())  # room for the text
+    ax.axvline(0, color="k", lw=0.8)
+    ax.set_xlabel("reward per episode, by term")
 
 
 def anatomy_row(anatomy: Mapping[str, float]) -> dict[str, str]:

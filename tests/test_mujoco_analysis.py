@@ -161,3 +161,26 @@ def test_forward_velocity_is_the_mean_x_velocity_of_the_episodes():
         velocities.append(info["x_velocity"])
         done = terminated or truncated
     assert forward_velocity(anatomy, "Humanoid-v5") == pytest.approx(np.mean(velocities), rel=1e-9)
+
+
+def test_plot_anatomy_draws_each_term_and_the_velocity():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rlbook.mujoco_analysis import plot_anatomy
+
+    stands = {"reward_survive": 5_000.0, "reward_forward": 625.0, "reward_ctrl": -200.0, "reward_contact": -100.0,
+              "length": 1_000.0}
+    walks = {**stands, "reward_forward": 1_875.0}  # 1.5 m/s on Humanoid-v5 (1.25 per m/s)
+    fig, ax = plt.subplots()
+    plot_anatomy(ax, {"stands": stands, "walks": walks}, "Humanoid-v5")
+    bars = {c.get_label(): c for c in ax.containers}
+    assert [b.get_width() for b in bars["staying healthy"]] == [5_000.0, 5_000.0]
+    assert [(b.get_x(), b.get_width()) for b in bars["moving forward"]] == [(5_000.0, 625.0), (5_000.0, 1_875.0)]
+    assert [b.get_width() for b in bars["control and contact costs"]] == [-300.0, -300.0]
+    assert [t.get_text() for t in ax.texts] == [" 0.50 m/s", " 1.50 m/s"]
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["stands", "walks"]
+    assert ax.get_yticks()[0] > ax.get_yticks()[1]  # the first label on top
+    plt.close(fig)
