@@ -183,10 +183,11 @@ def plot_anatomy(ax: Any, anatomies: Mapping[str, Mapping[str, float]], env_id: 
     ax.barh(y, survive, color="0.72", label="staying healthy")
     ax.barh(y, forward, left=survive, color="tab:blue", label="moving forward")
     ax.barh(y, costs, color="tab:red", label="control and contact costs")
-    for yi, label, end in zip(y, labels, survive + np.maximum(forward, 0)):
+    ends = survive + np.maximum(forward, 0)
+    for yi, label, end in zip(y, labels, ends):
         ax.text(end, yi, f" {forward_velocity(anatomies[label], env_id):.2f} m/s", va="center", fontsize=8)
     ax.set_yticks(y, labels)
-    ax.set_xlim(1.1 * min(costs.min(), 0), 1.15 * (survive + np.maximum(forward, 0)).max())  # room for the text
+    ax.set_xlim(1.1 * min(costs.min(), 0), 1.15 * ends.max())  # room for the text
     ax.axvline(0, color="k", lw=0.8)
     ax.set_xlabel("reward per episode, by term")
 
