@@ -109,5 +109,6 @@ from rlbook.analysis import (  # noqa: F401
     second_half_means,
     iqm_ci,
     iqm_difference_ci,
+    ablation_rows,
 )
 from rlbook.pages import PageRuns, check_printed, check_results, printed_numbers  # noqa: F401

@@ -181,6 +181,26 @@ def iqm_difference_ci(scores: Any, baseline: Any, reps: int = 2000, seed: int = 
 # [/iqm-ci]
 
 
+def ablation_rows(scores: Mapping[str, Any], baseline: str, complete: bool) -> list[dict[str, Any]]:
+    """One table row per arm of an ablation: its seeds, the IQM of their scores with a 95 % interval, and the IQM's
+    difference from the ``baseline`` arm with its own interval (:func:`iqm_difference_ci`), which is what removing a
+    device costs. The difference, a ranking, is given only when ``complete`` (every arm has all its seeds)."""
+    if baseline not in scores:
+        raise ValueError(f"the baseline arm {baseline!r} has no scores; arms: {', '.join(scores)}")
+    rows = []
+    for arm, (m, lo, hi) in iqm_ci(scores).items():
+        if arm == baseline:
+            diff = "(the baseline)"
+        elif not complete:
+            diff = "once every arm has all its seeds"
+        else:
+            d, dlo, dhi = iqm_difference_ci(scores[arm], scores[baseline])
+            diff = f"{d:+,.0f} ({dlo:+,.0f} to {dhi:+,.0f})"
+        rows.append({"arm": arm, "seeds": len(scores[arm]), "IQM": f"{m:,.0f}",
+                     "95 % interval": f"{lo:,.0f} to {hi:,.0f}", f"IQM minus {baseline}'s (95 % interval)": diff})
+    return rows
+
+
 def fisher_exact(k1: int, n1: int, k2: int, n2: int) -> float:
     """Two-sided p-value of Fisher's exact test that ``k1`` of ``n1`` and ``k2`` of ``n2`` come from one rate: with
     the margins fixed, the probability of every split of the ``k1 + k2`` successes at most as likely as this one."""

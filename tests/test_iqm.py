@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from rlbook import RunResults, RunSpec, SeedResult
-from rlbook.analysis import eval_curves, iqm_ci, iqm_difference_ci, second_half_means
+from rlbook.analysis import ablation_rows, eval_curves, iqm_ci, iqm_difference_ci, second_half_means
 from rlcore.evaluate import iqm
 
 
@@ -88,3 +88,18 @@ def test_second_half_means_start_at_the_middle_of_the_budget():
     assert second_half_means(run).tolist() == [20.0, 0.0]   # steps 50, 75, 100
     curves = eval_curves(run)
     assert [c[0].tolist() for c in curves] == [[25, 50, 75, 100]] * 2 and curves[1][1].tolist() == [100, 0, 0, 0]
+
+
+def test_ablation_rows_rank_only_once_every_arm_is_complete():
+    scores = {"TD3": [3000.0, 3100.0, 3200.0, 3300.0, 3400.0], "no delay": [1000.0, 1100.0, 1200.0, 1300.0, 1400.0]}
+    rows = {row["arm"]: row for row in ablation_rows(scores, "TD3", complete=True)}
+    assert rows["TD3"]["IQM"] == "3,200" and rows["no delay"]["seeds"] == 5
+    assert rows["TD3"]["IQM minus TD3's (95 % interval)"] == "(the baseline)"
+    d, lo, hi = iqm_difference_ci(scores["no delay"], scores["TD3"])
+    assert d == -2000.0 and hi < 0   # every resample of these seeds says removing it costs
+    assert rows["no delay"]["IQM minus TD3's (95 % interval)"] == f"-2,000 ({lo:+,.0f} to {hi:+,.0f})"
+    waiting = {row["arm"]: row for row in ablation_rows({**scores, "TD3": scores["TD3"][:2]}, "TD3", complete=False)}
+    assert waiting["no delay"]["IQM minus TD3's (95 % interval)"] == "once every arm has all its seeds"
+    assert waiting["TD3"]["seeds"] == 2 and waiting["TD3"]["IQM"] == "3,050"
+    with pytest.raises(ValueError, match="baseline arm 'TD3' has no scores"):
+        ablation_rows({"no delay": scores["no delay"]}, "TD3", complete=False)
