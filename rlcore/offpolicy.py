@@ -69,8 +69,8 @@ class OffPolicyConfig:
     checkpoint_every: int = 50_000
     """Write checkpoint.pt every this many steps (and at the end, and on Ctrl-C)."""
     replay_in_checkpoint: bool = True
-    """Save the replay memory in the checkpoint. A run resumed from a checkpoint written at an episode's end is
-    then exactly the uninterrupted run; one stopped mid-episode restarts that episode."""
+    """Save the replay memory in the checkpoint. A resumed run is then exactly the uninterrupted run, also when it
+    was stopped mid-episode: the checkpoint holds the episode in progress (:func:`rlcore.envs.restore_episode`)."""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments for ``gymnasium.make``."""
 

@@ -3,10 +3,10 @@ that overestimates and a policy that chases its errors.
 
     initialize critics Q_1, Q_2, actor mu, targets Q'_1, Q'_2, mu' as copies, replay memory R
     for each step t:
-        a_t = clip(mu(s_t) + eps, low, high),  eps ~ N(0, sigma^2)               (exploration)
+        a_t = clip(mu(s_t) + h eps, low, high),  eps ~ N(0, sigma^2)             (exploration; h: the box's half-width)
         store (s_t, a_t, r_t, s_{t+1}, terminated) in R
         sample a minibatch from R
-        a~ = clip(mu'(s') + clip(eps~, -c, c), low, high),  eps~ ~ N(0, sigma~^2)   (target-policy smoothing)
+        a~ = clip(mu'(s') + h clip(eps~, -c, c), low, high),  eps~ ~ N(0, sigma~^2) (target-policy smoothing)
         y = r + gamma * min_{j=1,2} Q'_j(s', a~)          (clipped double Q; y = r at terminal states)
         update both critics by minimizing sum_j (1/N) sum (y - Q_j(s, a))^2
         if t mod d = 0:                                                            (delayed updates)
@@ -156,7 +156,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     loop.resume()
 
     def act(obs: np.ndarray) -> np.ndarray:
-        """a = clip(mu(s) + eps, low, high)."""
+        """a = clip(mu(s) + h eps, low, high)."""
         with torch.no_grad():
             action = actor(observations.tensor(obs).unsqueeze(0))[0].numpy()
         return box.clip(action + box.half * noise())
