@@ -110,13 +110,11 @@ class SquashedGaussianActor(nn.Module):
         h = self.body(obs)
         return self.mean(h), self.log_std(h).clamp(LOG_STD_MIN, LOG_STD_MAX)
 
-    # [sac-sample]
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(a, log pi(a|s)) for a ~ pi(.|s), reparameterized: u = m(s) + sigma(s) * eps, eps ~ N(0, I)."""
         mean, log_std = self.gaussian(obs)
         u = mean + log_std.exp() * torch.randn_like(mean)
         return self.center + self.scale * torch.tanh(u), squashed_log_prob(u, mean, log_std)
-    # [/sac-sample]
 
     def deterministic(self, obs: torch.Tensor) -> torch.Tensor:
         return self.center + self.scale * torch.tanh(self.gaussian(obs)[0])
