@@ -99,6 +99,13 @@ class RunResults:
         """Training steps per seed of what is shown (the live budget for a live stand-in)."""
         return self.spec.steps
 
+    def finished(self, seed: int) -> SeedResult:
+        """The finished seed ``seed`` (a seed in training is not one)."""
+        for s in self.seeds:
+            if s.seed == seed:
+                return s
+        raise KeyError(f"{self.name}: seed {seed} has not finished (finished: {[s.seed for s in self.seeds]})")
+
 
 def _read_seed(seed: int, folder: Path, snapshot: dict[str, Any] | None = None) -> SeedResult:
     return SeedResult(

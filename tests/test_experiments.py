@@ -158,6 +158,9 @@ def test_run_writes_small_results_and_is_resumable(tiny, tmp_path):
     ex.run_experiment("tiny", only=["ql"], seeds=[0], results=results, work=work)
     loaded = ex.load_experiment("tiny", results)
     assert [s.seed for s in loaded["ql"].seeds] == [0] and loaded["ql"].missing == [1]
+    assert loaded["ql"].finished(0) is loaded["ql"].seeds[0]
+    with pytest.raises(KeyError, match=r"ql: seed 1 has not finished \(finished: \[0\]\)"):
+        loaded["ql"].finished(1)
     lines = ex.run_experiment("tiny", jobs=2, results=results, work=work)
     assert any("already in" in line for line in lines)  # seed 0 is not trained twice
     loaded = ex.load_experiment("tiny", results)
