@@ -100,19 +100,24 @@ def stored_reward_anatomy(s: SeedResult, env_id: str, episodes: int, first_reset
     return stored(s, "reward-anatomy", params, lambda: reward_anatomy(s.policy, env_id, episodes, seed=first_reset_seed))
 
 
+def fresh_seed_scores(run: RunResults, episodes: int = 10, first_reset_seed: int = 20_000) -> np.ndarray:
+    """Each finished seed's score, in the order of ``run.seeds``: the mean return of its final policy on ``episodes``
+    fresh episodes (:func:`stored_returns`, seed ``s`` from ``reset(seed=first_reset_seed + s + i)``)."""
+    return np.array([stored_returns(s, run.spec.env_id, episodes, first_reset_seed + s.seed).mean()
+                     for s in run.seeds])
+
+
 def fresh_iqm_rows(arms: dict[str, RunResults], episodes: int = 10, first_reset_seed: int = 20_000,
                    min_seeds: int = 3) -> list[dict[str, str]]:
     """One table row per algorithm (label -> run): each finished seed's final policy on ``episodes`` fresh episodes
-    (:func:`stored_returns`, seed ``s`` from ``reset(seed=first_reset_seed + s + i)``), its mean as the seed's score,
-    and the interquartile mean over seeds with its 95 % bootstrap interval (:func:`rlbook.analysis.iqm_ci`) and the
+    (:func:`fresh_seed_scores`), its mean as the seed's score, and the interquartile mean over seeds with its 95 % bootstrap interval (:func:`rlbook.analysis.iqm_ci`) and the
     lowest seed. An arm with fewer than ``min_seeds`` finished seeds is listed without a summary, saying how many
     it has: no IQM is drawn from fewer."""
     from rlbook.analysis import iqm_ci
 
     rows = []
     for label, run in arms.items():
-        scores = np.array([stored_returns(s, run.spec.env_id, episodes, first_reset_seed + s.seed).mean()
-                           for s in run.seeds])
+        scores = fresh_seed_scores(run, episodes, first_reset_seed)
         row = {"algorithm": label, "task": run.spec.env_id, "steps": f"{run.spec.steps:,}",
                "finished seeds": f"{len(scores)} of {len(run.spec.seeds)}"}
         if len(scores) >= min_seeds:
