@@ -97,7 +97,7 @@ def settings_for(algo: str, spec: Any) -> dict[str, Any]:
 
 def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 500, progress: bool = False,
                changes: dict[str, Any] | None = None, algo: str | None = None) -> dict[str, Any]:
-    """Re-train ``seed`` of ``experiment/run`` (a DDPG or TD3 run of the registry) for its first ``steps`` steps with
+    """Re-train ``seed`` of ``experiment/run`` (a DDPG, TD3 or SAC run of the registry) for its first ``steps`` steps with
     a :class:`CriticProbe`; returns the rows and the re-run's evaluations. ``changes`` overrides Config fields of the
     run, and ``algo`` trains it with another algorithm that takes those fields (``td3`` on a DDPG run: then it is a
     different run, and its evaluations will not match the stored ones)."""
@@ -107,11 +107,15 @@ def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 50
     spec = chosen_runs(experiment, [run])[0]
     algo = algo or spec.algo
     if algo not in TRACEABLE:
-        raise ValueError(f"{experiment}/{run} would train {algo}; the critic trace watches {' and '.join(TRACEABLE)}")
+        raise ValueError(f"{experiment}/{run} would train {algo}; the critic trace watches "
+                         f"{', '.join(TRACEABLE[:-1])} and {TRACEABLE[-1]}")
     if not 0 < steps <= spec.steps:
         raise ValueError(f"--steps must be between 1 and the run's {spec.steps:,} steps, got {steps:,}")
     module = get_algorithm(algo)
     config = module.make_config(algo, **{**settings_for(algo, spec), **(changes or {})})
+    if steps < config.learning_starts:
+        raise ValueError(f"--steps {steps:,} ends before learning starts (step {config.learning_starts:,}), so there "
+                         f"is no critic update to trace: give at least {config.learning_starts:,}")
     probe = CriticProbe(every)
     res = module.train(spec.env_id, config, steps=steps, seed=seed, out=None, progress=progress, on_update=probe)
     return {"rows": probe.rows, "eval_steps": [int(s) for s in res.eval_steps],
@@ -183,7 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     from rlcore.runs import write_json
 
     p = Parser(prog="python -m rlbook.critic_trace", description=__doc__.split("\n\n")[0])
-    p.add_argument("run", metavar="EXPERIMENT/RUN", help="a DDPG run of the registry, e.g. ddpg-modern-1m/humanoid")
+    p.add_argument("run", metavar="EXPERIMENT/RUN",
+                   help="a DDPG, TD3 or SAC run of the registry, e.g. ddpg-modern-1m/humanoid")
     p.add_argument("--seeds", type=seed_list, required=True, help="comma-separated seeds, e.g. 1,2")
     p.add_argument("--steps", type=count(1), required=True, help="environment steps to re-train each seed for")
     p.add_argument("--every", type=count(1), default=500, help="record every this many learning steps (default 500)")

@@ -91,9 +91,10 @@ def test_a_stored_trace_loads_as_arrays(tmp_path):
 
 @pytest.mark.parametrize("argv, message", [
     (["ddpg-modern-1m/no-such-run", "--seeds", "0", "--steps", "10"], "has no run"),
-    (["ppo-mujoco-1m/hopper", "--seeds", "0", "--steps", "10"], "watches ddpg and td3"),
+    (["ppo-mujoco-1m/hopper", "--seeds", "0", "--steps", "10"], "watches ddpg, td3 and sac"),
     (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "2000000"], "between 1 and"),
     (["ddpg-modern-1m", "--seeds", "0", "--steps", "10"], "EXPERIMENT/RUN"),
+    (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "9999"], "before learning starts (step 10,000)"),
     (["ddpg-modern-1m/humanoid", "--seeds", "x", "--steps", "10"], "comma-separated"),
     (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "10", "--set", "critic_rate=1"], "no field"),
 ])
