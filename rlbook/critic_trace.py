@@ -97,10 +97,10 @@ def settings_for(algo: str, spec: Any) -> dict[str, Any]:
 
 def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 500, progress: bool = False,
                changes: dict[str, Any] | None = None, algo: str | None = None) -> dict[str, Any]:
-    """Re-train ``seed`` of ``experiment/run`` (a DDPG, TD3 or SAC run of the registry) for its first ``steps`` steps with
-    a :class:`CriticProbe`; returns the rows and the re-run's evaluations. ``changes`` overrides Config fields of the
-    run, and ``algo`` trains it with another algorithm that takes those fields (``td3`` on a DDPG run: then it is a
-    different run, and its evaluations will not match the stored ones)."""
+    """Re-train ``seed`` of ``experiment/run`` (a DDPG, TD3 or SAC run of the registry) for its first ``steps`` steps
+    with a :class:`CriticProbe`; returns the rows and the re-run's evaluations. ``changes`` overrides Config fields
+    of the run, and ``algo`` trains it with another algorithm that takes those fields (``td3`` on a DDPG run: then it
+    is a different run, and its evaluations will not match the stored ones)."""
     from rlcore.algos import get_algorithm
     from rlbook.runner import chosen_runs
 
@@ -132,7 +132,8 @@ def trace(experiment_run: str, seeds: list[int], steps: int, every: int = 500, p
         raise ValueError(f"expected EXPERIMENT/RUN such as ddpg-modern-1m/humanoid, got {experiment_run!r}")
     spec = chosen_runs(experiment, [run])[0]
     return {"experiment": experiment, "run": run, "env_id": spec.env_id, "overrides": spec.overrides,
-            "changes": changes or {}, "algo": algo or spec.algo, "steps": steps, "every": every, "columns": list(COLUMNS),
+            "changes": changes or {}, "algo": algo or spec.algo, "steps": steps, "every": every,
+            "columns": list(COLUMNS),
             "seeds": {str(s): trace_seed(experiment, run, s, steps, every, progress, changes, algo) for s in seeds}}
 
 
