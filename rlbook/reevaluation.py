@@ -110,9 +110,9 @@ def fresh_seed_scores(run: RunResults, episodes: int = 10, first_reset_seed: int
 def fresh_iqm_rows(arms: dict[str, RunResults], episodes: int = 10, first_reset_seed: int = 20_000,
                    min_seeds: int = 3) -> list[dict[str, str]]:
     """One table row per algorithm (label -> run): each finished seed's final policy on ``episodes`` fresh episodes
-    (:func:`fresh_seed_scores`), its mean as the seed's score, and the interquartile mean over seeds with its 95 % bootstrap interval (:func:`rlbook.analysis.iqm_ci`) and the
-    lowest seed. An arm with fewer than ``min_seeds`` finished seeds is listed without a summary, saying how many
-    it has: no IQM is drawn from fewer."""
+    (:func:`fresh_seed_scores`), its mean as the seed's score, and the interquartile mean over seeds with its 95 %
+    bootstrap interval (:func:`rlbook.analysis.iqm_ci`) and the lowest seed. An arm with fewer than ``min_seeds``
+    finished seeds is listed without a summary, saying how many it has: no IQM is drawn from fewer."""
     from rlbook.analysis import iqm_ci
 
     rows = []
