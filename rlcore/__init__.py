@@ -17,7 +17,8 @@ The algorithms, each a ``Config``, the math as small functions, and a ``train`` 
 
 What they share:
 
-- :mod:`rlcore.onpolicy`    the on-policy core of A2C, PPO, DPPO and REINFORCE: their shared Config, actor-critic, rollouts, GAE
+- :mod:`rlcore.onpolicy`    the on-policy core of A2C, PPO, DPPO and REINFORCE: their shared Config, actor-critic,
+                            rollouts, GAE
 - :mod:`rlcore.offpolicy`   the off-policy core of DDPG, TD3 and SAC: the loop and its per-update hook, actor, critics
 - :mod:`rlcore.harness`     everything around a training loop: resume, checkpoints, logs, evaluation, best policy
 - :mod:`rlcore.nets`        ``mlp()`` and the Q-network, dueling, actor and critic heads

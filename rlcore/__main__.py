@@ -58,7 +58,8 @@ def _load_run(run_dir: str, which: str = "last"):
     except CheckpointError as err:
         if which == "best" and not path.exists():
             raise CheckpointError(f"No {path.name} in {run_dir}: a run keeps its best-evaluated policy once it has "
-                                  "evaluated one (eval_every > 0); results/ keeps only the last (--which last).") from None
+                                  "evaluated one (eval_every > 0); results/ keeps only the last (--which last)."
+                                  ) from None
         if Path(run_dir).is_dir() and not path.exists():
             raise CheckpointError(f"No checkpoint at {path} and no {' or '.join(POLICY_FILES)} in {run_dir}: "
                                   "train first, or check the path.") from None
@@ -132,7 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--seed", type=count(0), default=0)
     t.add_argument("--out", required=True, help="run folder (config, progress.csv, checkpoint.pt)")
     t.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a Config field (repeatable)")
-    t.add_argument("--env-kwargs", type=json_object, help='JSON keyword arguments for gymnasium.make, e.g. \'{"is_slippery": false}\'')
+    t.add_argument("--env-kwargs", type=json_object,
+                   help='JSON keyword arguments for gymnasium.make, e.g. \'{"is_slippery": false}\'')
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
 

@@ -7,7 +7,8 @@ Each name maps to a module that provides:
   and saves a checkpoint on Ctrl-C;
 - ``load_policy(checkpoint) -> policy``: the deterministic policy, a callable from observation to action.
 
-Later chapters add their algorithms here (``dqn``, ``a2c``, ``reinforce``, ``ppo``, ``dppo``, ``ddpg``, ``td3``, ``sac``).
+Later chapters add their algorithms here (``dqn``, ``a2c``, ``reinforce``, ``ppo``, ``dppo``, ``ddpg``, ``td3``,
+``sac``).
 """
 
 from __future__ import annotations

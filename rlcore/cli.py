@@ -109,7 +109,8 @@ def overrides(config_cls: type, pairs: list[str]) -> dict[str, Any]:
         key, text = pair.split("=", 1)
         key = key.strip().replace("-", "_")
         if key not in fields:
-            raise ValueError(f"{config_cls.__module__}.Config has no field {key!r}; fields: {', '.join(sorted(fields))}")
+            raise ValueError(f"{config_cls.__module__}.Config has no field {key!r}; "
+                             f"fields: {', '.join(sorted(fields))}")
         out[key] = parse_value(text, hints.get(key))
     return out
 

@@ -4,7 +4,8 @@ refused with one line that says what is accepted, before any work starts.
 A field is checked by its name, so that ``gamma`` means the same in every algorithm: :data:`RANGES` lists each
 named field's accepted interval (a Config whose field means something else at a bound, such as DQN's
 ``max_grad_norm = 0`` for "no clipping", says so in a class attribute ``RANGES`` of its own), and
-:func:`check_config` also checks that a number is a number (``--set actor_lr=abc`` is refused, not trained with). Fields not listed are checked only for their type.
+:func:`check_config` also checks that a number is a number (``--set actor_lr=abc`` is refused, not trained with).
+Fields not listed are checked only for their type.
 """
 
 from __future__ import annotations

@@ -214,7 +214,8 @@ def mean_over_workers(stats: np.ndarray, mean_kl: float, new_returns: list[float
     summary = torch.tensor([*np.mean(stats, axis=0), mean_kl, sum(new_returns), len(new_returns)], dtype=torch.float64)
     dist.all_reduce(summary)
     episodes = int(summary[7])
-    return (summary[:6] / dist.get_world_size()).tolist(), episodes, float(summary[6]) / episodes if episodes else float("nan")
+    mean_return = float(summary[6]) / episodes if episodes else float("nan")
+    return (summary[:6] / dist.get_world_size()).tolist(), episodes, mean_return
 
 
 def dump_worker_state(folder, agent, optimizer, kl_coef: float, step: int, iteration: int, *stats) -> None:
@@ -239,7 +240,8 @@ def _train(env_id, config: Config, steps, seed, out, progress, dump_params, comm
     per_update = config.n_steps * config.num_envs * world
     target = -(-steps // per_update) * per_update
     distributed = {"world_size": world, "backend": dist.get_backend()}
-    opened = open_on_rank0(out, env_id, config, steps, seed, {"distributed": distributed, **({"command": command} if command else {})})
+    opened = open_on_rank0(out, env_id, config, steps, seed,
+                           {"distributed": distributed, **({"command": command} if command else {})})
     evaluate = Evaluation(lambda: evaluation(deterministic_policy(agent, spaces, obs_rms), eval_env,
                                              config.eval_episodes, seed + 10_000), at_end=True,
                           keep_best=POLICY_KEYS)

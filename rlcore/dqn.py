@@ -167,7 +167,8 @@ def evaluate_q(q: torch.nn.Module, env: gym.Env, episodes: int, seed: int, gamma
         q_start = q(torch.as_tensor(starts, dtype=torch.float32)).max(dim=1).values.mean().item()
     returns = np.array([r.sum() for r in rewards])
     return {"mean_return": float(returns.mean()), "std_return": float(returns.std()), "episodes": episodes,
-            "q_start": q_start, "discounted_return_start": float(np.mean([discounted_return(r, gamma) for r in rewards]))}
+            "q_start": q_start,
+            "discounted_return_start": float(np.mean([discounted_return(r, gamma) for r in rewards]))}
 
 
 def check_spaces(env: gym.Env, env_id: str) -> tuple[int, int]:
@@ -304,7 +305,8 @@ def train(
             if step >= config.learning_starts and step % config.train_freq == 0:
                 beta = config.per_beta_start + (1.0 - config.per_beta_start) * min(step / steps, 1.0)
                 for _ in range(config.gradient_steps):
-                    batch = buffer.sample(config.batch_size, beta) if config.prioritized else buffer.sample(config.batch_size)
+                    batch = (buffer.sample(config.batch_size, beta) if config.prioritized
+                             else buffer.sample(config.batch_size))
                     _, td_errors = update(q, q_target, optimizer, batch, config)
                     if config.prioritized:
                         buffer.update_priorities(batch.indices, td_errors)

@@ -60,9 +60,9 @@ def make_env(
     """Make one Gymnasium environment, the way every chapter does.
 
     The id is checked first (a typo gets suggestions, not a registry traceback). Rendering to
-    ``rgb_array`` picks a headless OpenGL backend for a MuJoCo task (other tasks draw without OpenGL). ``RecordEpisodeStatistics`` puts the
-    episode's return and length into ``info["episode"]`` when it ends. The action and observation
-    spaces are seeded with ``seed``; seed the first ``reset`` with the same number:
+    ``rgb_array`` picks a headless OpenGL backend for a MuJoCo task (other tasks draw without OpenGL).
+    ``RecordEpisodeStatistics`` puts the episode's return and length into ``info["episode"]`` when it ends. The
+    action and observation spaces are seeded with ``seed``; seed the first ``reset`` with the same number:
     ``obs, info = env.reset(seed=seed)``.
     """
     check_env_id(env_id)

@@ -127,7 +127,8 @@ def _unknown_backend_message(name: str, system: str | None = None) -> str:
     system = system or platform.system()
     known = ", ".join(MUJOCO_GL_NAMES.get(system, ("glfw",)))
     return _no_backend_message({name: f"not a backend MuJoCo knows on {system} (it knows {known})"}, system,
-                               fix=f"To fix it, unset MUJOCO_GL or set it to one of {', '.join(platform_backends(system))}.")
+                               fix="To fix it, unset MUJOCO_GL or set it to one of "
+                                   f"{', '.join(platform_backends(system))}.")
 
 
 def select_gl_backend(candidates: Sequence[str] | None = None) -> str:

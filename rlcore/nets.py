@@ -12,7 +12,8 @@ import torch
 from torch import nn
 
 
-def mlp(sizes: Sequence[int], activation: type[nn.Module] = nn.ReLU, output_activation: type[nn.Module] | None = None) -> nn.Sequential:
+def mlp(sizes: Sequence[int], activation: type[nn.Module] = nn.ReLU,
+        output_activation: type[nn.Module] | None = None) -> nn.Sequential:
     """A multilayer perceptron: ``sizes = [in, hidden..., out]``, ``activation`` between layers."""
     if len(sizes) < 2:
         raise ValueError(f"mlp needs at least an input and an output size, got {list(sizes)}")

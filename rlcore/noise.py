@@ -10,13 +10,13 @@
   OpenAI Baselines' ``adapt_param_noise``: the behaviour policy of the episode that just ended was perturbed from
   an older actor, and its distance would also count the training in between.
 
-  What DDPG runs with it is not Baselines' parameter noise (``baselines/ddpg/main.py``, the paper's script, by
-  default ``--noise-type adaptive-param_0.2``): sigma adapts once per episode, at its end (Baselines: once per cycle of 100 environment steps,
-  ``param_noise_adaption_interval=50`` within each cycle's 50 training steps); the distance and its target are
-  in the environment's action units, the actor's output scaled to the box (Baselines: the tanh output in
-  [-1, 1], i.e. half-ranges, the unit of the other noises here; the same on a [-1, 1] box); the actor has no
-  layer normalization and every parameter is perturbed (that script: layer norm after every hidden layer, on by
-  default, its gains and biases unperturbed); sigma starts at ``initial_sigma`` (Baselines: at the target).
+  What DDPG runs with it is not Baselines' parameter noise (``baselines/ddpg/main.py``, the paper's script, by default
+  ``--noise-type adaptive-param_0.2``): sigma adapts once per episode, at its end (Baselines: once per cycle of 100
+  environment steps, ``param_noise_adaption_interval=50`` within each cycle's 50 training steps); the distance and its
+  target are in the environment's action units, the actor's output scaled to the box (Baselines: the tanh output in
+  [-1, 1], i.e. half-ranges, the unit of the other noises here; the same on a [-1, 1] box); the actor has no layer
+  normalization and every parameter is perturbed (that script: layer norm after every hidden layer, on by default, its
+  gains and biases unperturbed); sigma starts at ``initial_sigma`` (Baselines: at the target).
 """
 
 from __future__ import annotations
@@ -71,7 +71,8 @@ class OrnsteinUhlenbeckNoise:
         self.x = np.full(size, mu, dtype=float)
 
     def __call__(self) -> np.ndarray:
-        self.x = self.x + self.theta * (self.mu - self.x) * self.dt + self.sigma * np.sqrt(self.dt) * self.rng.normal(size=self.x.shape)
+        self.x = (self.x + self.theta * (self.mu - self.x) * self.dt
+                  + self.sigma * np.sqrt(self.dt) * self.rng.normal(size=self.x.shape))
         return self.x.copy()
 
     def reset(self) -> None:

@@ -88,7 +88,8 @@ def check_spaces(env: gym.Env, env_id: str, algo: str) -> dict[str, Any]:
         raise ValueError(f"rlcore's {algo} takes flat vector observations, but {env_id} has {obs}.")
     if not (np.all(np.isfinite(act.low)) and np.all(np.isfinite(act.high))):
         raise ValueError(f"{algo} squashes actions into a bounded box, but {env_id}'s action space is unbounded.")
-    return {"obs_dim": int(obs.shape[0]), "act_dim": int(act.shape[0]), "low": act.low.tolist(), "high": act.high.tolist()}
+    return {"obs_dim": int(obs.shape[0]), "act_dim": int(act.shape[0]),
+            "low": act.low.tolist(), "high": act.high.tolist()}
 
 
 def make_envs(env_id: str, config: OffPolicyConfig, seed: int, algo: str) -> tuple[gym.Env, gym.Env, dict[str, Any]]:

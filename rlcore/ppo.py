@@ -132,7 +132,8 @@ def approx_kl(logp_old: torch.Tensor, logp_new: torch.Tensor) -> torch.Tensor:
     return (torch.exp(log_ratio) - 1.0 - log_ratio).mean()
 
 
-def adaptive_kl_coef(beta: float, kl: float, kl_target: float, beta_low: float, beta_high: float, alpha: float) -> float:
+def adaptive_kl_coef(beta: float, kl: float, kl_target: float, beta_low: float, beta_high: float,
+                     alpha: float) -> float:
     """The report's rule: grow beta by alpha above beta_high * target, shrink it below beta_low * target."""
     if kl > beta_high * kl_target:
         return beta * alpha
@@ -262,7 +263,8 @@ def train(
             # [ppo-loop]
             lr = set_learning_rate(optimizer, config, iteration / iterations)
             # 1. run the policy for T steps in each environment
-            obs = collect_rollout(agent, envs, obs, buf, on_episode, config.explore_noise * config.explore_decay ** step)
+            noise = config.explore_noise * config.explore_decay ** step
+            obs = collect_rollout(agent, envs, obs, buf, on_episode, noise)
             step += per_iter
             # 2. advantages, 3. n_epochs passes of minibatch gradient steps
             stats, mean_kl = ppo_update(agent, optimizer, rollout_batch(buf, config), config, kl_coef, rng)

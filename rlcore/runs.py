@@ -118,7 +118,8 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
             record.setdefault("resumes", []).append({k: resume[k] for k in RESUME_FIELDS if k in resume})
             write_json(run.meta, record)
         return run, ckpt
-    write_json(run.config, {"algo": algo, "env_id": env_id, "seed": seed, "steps": steps, "config": config_dict(config)})
+    write_json(run.config, {"algo": algo, "env_id": env_id, "seed": seed, "steps": steps,
+                            "config": config_dict(config)})
     write_json(run.meta, run_metadata(algo=algo, env_id=env_id, seed=seed, steps=steps, **meta))
     return run, None
 

@@ -19,9 +19,9 @@ entropy near a target.
 
 The policy is a Gaussian N(m(s), sigma(s)^2) on u, squashed: x = tanh(u) in (-1, 1)^d, and the action is
 a = centre + half-width * x, in the task's box. Log-probabilities, and so the entropy that alpha regulates, are those
-of x, measured before the box's affine map: the target -dim(A) then means the same on Humanoid's +-0.4 box as on a +-1 box
-(as in Stable-Baselines3; CleanRL also subtracts log half-width per dimension). Evaluation acts with the mean action
-centre + half-width * tanh(m(s)).
+of x, measured before the box's affine map: the target -dim(A) then means the same on Humanoid's +-0.4 box as on a
++-1 box (as in Stable-Baselines3; CleanRL also subtracts log half-width per dimension). Evaluation acts with the
+mean action centre + half-width * tanh(m(s)).
 """
 
 from __future__ import annotations

@@ -213,7 +213,8 @@ def train(
     Each episode: reset, then repeat — act epsilon-greedily, step, update ``Q[s, a]`` toward its TD
     target — until the episode terminates or is truncated. With ``out``, the run writes its config,
     metadata, a per-episode ``progress.csv`` and ``checkpoint.pt`` there; if ``out`` already holds an
-    unfinished checkpoint of the same run, training resumes from it. Ctrl-C stops at the end of the step, with a checkpoint.
+    unfinished checkpoint of the same run, training resumes from it. Ctrl-C stops at the end of the step, with a
+    checkpoint.
     """
     check_budget(steps, seed)
     config = config or Config()
