@@ -71,7 +71,8 @@ def last_evals(evals: dict[str, np.ndarray], k: int = 5) -> float:
 
 
 def mean_std(values, digits: int = 0) -> str:
-    """Per-seed values as table text: "mean ± std" over seeds (the population std), one value as itself, none as —."""
+    """Per-seed values as table text: "mean ± std" over seeds (the population std), one value as itself, none
+    as —."""
     values = np.asarray(values, dtype=float)
     if len(values) == 0:
         return "—"
@@ -225,7 +226,8 @@ def learning_seconds(run: dict[str, Any]) -> float:
 def scaling_rows(record: dict[str, Any]) -> list[dict[str, Any]]:
     """One table row per run of ``benchmarks/dppo_scaling.py``'s record (rates in env-steps/s, times per update)."""
     return [{"workers": r["workers"], "sharing": r.get("share", "gradients") if r["workers"] > 1 else "(nothing)",
-             "env-steps/s (training)": r["env_steps_per_second"], "ratio to 1 worker": f"{r['ratio_to_1_worker']:.2f}×",
+             "env-steps/s (training)": r["env_steps_per_second"],
+             "ratio to 1 worker": f"{r['ratio_to_1_worker']:.2f}×",
              "env-steps/s incl. start-up": r["env_steps_per_second_wall"],
              "rollout s / update": f"{r['rollout_seconds_per_update']:.3f}",
              "learning + sync s / update": f"{learning_seconds(r):.3f}"}

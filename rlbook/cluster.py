@@ -114,8 +114,8 @@ def unpack(files: dict[str, bytes], folder: Path) -> None:
 
 @contextlib.contextmanager
 def command_typed(command: str | None):
-    """Inside: :func:`rlcore.provenance.command_line` is ``command`` (``RLCORE_COMMAND``), the one typed on the submitting
-    machine; afterwards the environment is as it was (a Ray worker process runs task after task)."""
+    """Inside: :func:`rlcore.provenance.command_line` is ``command`` (``RLCORE_COMMAND``), the one typed on the
+    submitting machine; afterwards the environment is as it was (a Ray worker process runs task after task)."""
     before = os.environ.get("RLCORE_COMMAND")
     if command:
         os.environ["RLCORE_COMMAND"] = command

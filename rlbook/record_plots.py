@@ -28,7 +28,8 @@ def plot_scaling(record: Mapping, axes=None):
     axes[0].legend()
     for r in results:
         if r.get("curve") and r["curve"]["step"]:
-            label = "1 worker" if r["workers"] == 1 else f"{r['workers']} workers, sharing {r.get('share', 'gradients')}"
+            label = ("1 worker" if r["workers"] == 1
+                     else f"{r['workers']} workers, sharing {r.get('share', 'gradients')}")
             axes[1].plot(r["curve"]["step"], r["curve"]["episode_return"], ".-", label=label)
     axes[1].set(xlabel="environment steps (all workers)", ylabel="training episode return",
                 title="return per env-step (one seed each)")

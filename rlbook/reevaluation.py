@@ -87,7 +87,8 @@ def stored_returns(s: SeedResult, env_id: str, episodes: int, first_reset_seed: 
     """Per-episode returns of ``s``'s final policy, episode ``i`` from ``reset(seed=first_reset_seed + i)``:
     :func:`stored` as ``returns``, else evaluated now."""
     params = {"env_id": env_id, "episodes": episodes, "first_reset_seed": first_reset_seed}
-    value = stored(s, "returns", params, lambda: {"returns": _episodes(s, env_id, episodes, first_reset_seed)["returns"]})
+    value = stored(s, "returns", params,
+                   lambda: {"returns": _episodes(s, env_id, episodes, first_reset_seed)["returns"]})
     return np.asarray(value["returns"], dtype=float)
 
 
@@ -97,7 +98,8 @@ def stored_reward_anatomy(s: SeedResult, env_id: str, episodes: int, first_reset
     from rlbook.mujoco_analysis import reward_anatomy
 
     params = {"env_id": env_id, "episodes": episodes, "first_reset_seed": first_reset_seed}
-    return stored(s, "reward-anatomy", params, lambda: reward_anatomy(s.policy, env_id, episodes, seed=first_reset_seed))
+    return stored(s, "reward-anatomy", params,
+                  lambda: reward_anatomy(s.policy, env_id, episodes, seed=first_reset_seed))
 
 
 def fresh_seed_scores(run: RunResults, episodes: int = 10, first_reset_seed: int = 20_000) -> np.ndarray:

@@ -95,7 +95,8 @@ def _ppo_mujoco_1m() -> Experiment:
     evals = {"eval_every": 20_000, "eval_episodes": 5, "checkpoint_every": 50_000}
     # (Hopper with the RL-Zoo settings: 3 seeds, all that fitted in the session that trained these)
     runs = [RunSpec(env.split("-")[0].lower(), "ppo", env, 1_000_000, seeds if env != "Hopper-v5" else seeds[:3],
-                    {**hp, **_ZOO_PPO_NET, **evals}, f"PPO-clip on {env}, RL-Zoo settings") for env, hp in ZOO_PPO.items()]
+                    {**hp, **_ZOO_PPO_NET, **evals}, f"PPO-clip on {env}, RL-Zoo settings")
+            for env, hp in ZOO_PPO.items()]
     runs.append(RunSpec("hopper-paper", "ppo", "Hopper-v5", 1_000_000, seeds, evals,
                         "PPO-clip on Hopper-v5, the PPO paper's settings (rlcore's defaults)"))
     # does exploration decide the standing plateau? the RL-Zoo Hopper settings with the paper's initial log std
@@ -103,7 +104,8 @@ def _ppo_mujoco_1m() -> Experiment:
                         {**ZOO_PPO["Hopper-v5"], **_ZOO_PPO_NET, **evals, "log_std_init": 0.0},
                         "PPO-clip on Hopper-v5, RL-Zoo settings but initial log std 0"))
     # and the other direction: the paper's settings with RL Zoo's initial log std
-    runs.append(RunSpec("hopper-paper-logstd-2", "ppo", "Hopper-v5", 1_000_000, seeds[:3], {**evals, "log_std_init": -2.0},
+    runs.append(RunSpec("hopper-paper-logstd-2", "ppo", "Hopper-v5", 1_000_000, seeds[:3],
+                        {**evals, "log_std_init": -2.0},
                         "PPO-clip on Hopper-v5, the PPO paper's settings but initial log std -2"))
     return Experiment(
         "ppo-mujoco-1m",
@@ -140,9 +142,10 @@ REPORT_DDPG_SEEDS: dict[str, tuple[int, ...]] = {"Ant-v5": (0, 1, 2, 3, 4), "Hal
 def _ddpg_report() -> Experiment:
     return Experiment(
         "ddpg-report",
-        "DDPG with the course report's settings (Tables 1-3) at its budgets on Ant, HalfCheetah and Hopper -v5, 5 seeds",
-        tuple(RunSpec(env.split("-")[0].lower(), "ddpg", env, steps, REPORT_DDPG_SEEDS[env], {**_REPORT_DDPG_COMMON, **hp},
-                      f"DDPG on {env}, the report's settings")
+        "DDPG with the course report's settings (Tables 1-3) at its budgets on Ant, HalfCheetah and Hopper -v5, "
+        "5 seeds",
+        tuple(RunSpec(env.split("-")[0].lower(), "ddpg", env, steps, REPORT_DDPG_SEEDS[env],
+                      {**_REPORT_DDPG_COMMON, **hp}, f"DDPG on {env}, the report's settings")
               for env, (steps, hp) in REPORT_DDPG.items()),
     )
 
@@ -258,7 +261,8 @@ def _ppo_report_hopper() -> Experiment:
     variants = {
         "clip": ({"objective": "clip"}, "PPO-clip (the report's PPO-v2)"),
         "kl": ({"objective": "kl"}, "PPO, adaptive KL penalty (PPO-v3)"),
-        "clip-advnorm": ({"objective": "clip", "normalize_advantage": True}, "PPO-clip, advantages normalised (PPO-v4)"),
+        "clip-advnorm": ({"objective": "clip", "normalize_advantage": True},
+                         "PPO-clip, advantages normalised (PPO-v4)"),
         "clip-explore": ({"objective": "clip", "explore_noise": 0.3, "explore_decay": 0.99995},
                          "PPO-clip with decaying action noise (PPO-v1)"),
     }
@@ -367,7 +371,8 @@ def _td3_sac_1m() -> Experiment:
         task = env.split("-")[0].lower()
         extra = {"normalize_obs": True} if env == "Humanoid-v5" else {}
         for algo, hp in (("td3", TD3_1M), ("sac", SAC_1M)):
-            runs.append(RunSpec(f"{algo}-{task}", algo, env, 1_000_000, (0, 1, 2), {**hp, **_OFFPOLICY_1M_EVALS, **extra},
+            runs.append(RunSpec(f"{algo}-{task}", algo, env, 1_000_000, (0, 1, 2),
+                                {**hp, **_OFFPOLICY_1M_EVALS, **extra},
                                 f"{algo.upper()} on {env}, 1M steps" + (", observations normalized" if extra else "")))
     return Experiment(
         "td3-sac-1m",

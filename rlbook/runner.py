@@ -163,8 +163,8 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None
     of its last checkpoint (:data:`SNAPSHOT_POLICY`, its step in the record as ``policy_step``): what the policy
     does part of the way, e.g. at 1M steps of a longer budget.
 
-    A snapshot holds no final ``policy.pt``: the seed still counts as missing, and when it finishes :func:`train_one` writes
-    its final files over the snapshot and removes the record. Taking one while the seed trains is safe: the
+    A snapshot holds no final ``policy.pt``: the seed still counts as missing, and when it finishes :func:`train_one`
+    writes its final files over the snapshot and removes the record. Taking one while the seed trains is safe: the
     logs only grow, and their rows up to any step are what the resumed run writes again.
     """
     from rlcore.logger import read_csv
