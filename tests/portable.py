@@ -20,7 +20,8 @@ def in_ci() -> bool:
 
 
 def skip_or_fail(reason: str) -> None:
-    """Skip the calling test with ``reason`` (one line: what is missing and how to get it); fail it under ``CI=true``."""
+    """Skip the calling test with ``reason`` (one line: what is missing and how to get it); fail it under
+    ``CI=true``."""
     if in_ci():
         pytest.fail(f"{reason} (CI=true: a missing requirement fails here instead of skipping)", pytrace=False)
     pytest.skip(reason)

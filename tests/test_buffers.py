@@ -89,7 +89,8 @@ def test_alpha_zero_is_uniform():
 
 def test_importance_weights_by_hand():
     # N = 4, P = [0.1, 0.2, 0.3, 0.4], beta = 1: w = 1/(4P) = [2.5, 1.25, 0.833, 0.625]; / max -> [1, .5, .333, .25]
-    np.testing.assert_allclose(importance_weights(np.array([0.1, 0.2, 0.3, 0.4]), 4, 1.0), [1, 0.5, 1 / 3, 0.25], rtol=1e-6)
+    np.testing.assert_allclose(importance_weights(np.array([0.1, 0.2, 0.3, 0.4]), 4, 1.0), [1, 0.5, 1 / 3, 0.25],
+                               rtol=1e-6)
     # beta = 0.5: sqrt of the beta = 1 weights
     np.testing.assert_allclose(importance_weights(np.array([0.1, 0.4]), 2, 0.5), [1.0, 0.5], rtol=1e-6)
     # beta = 0: no correction
@@ -181,7 +182,8 @@ def test_a_checkpoint_keeps_next_obs_once_and_restores_it_bit_for_bit(steps):
     b = ReplayBuffer(10, (3,), seed=99)
     b.load_state_dict(state)
     for name in ("obs", "next_obs", "actions", "rewards", "terminated"):
-        np.testing.assert_array_equal(getattr(a, name)[:len(a)].view(np.uint8), getattr(b, name)[:len(b)].view(np.uint8))
+        np.testing.assert_array_equal(getattr(a, name)[:len(a)].view(np.uint8),
+                                      getattr(b, name)[:len(b)].view(np.uint8))
     assert (b.pos, len(b)) == (a.pos, len(a))
 
 

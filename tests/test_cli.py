@@ -12,7 +12,8 @@ from rlcore.checkpoint import load_checkpoint
 
 
 def rlcore(*args, check=True):
-    proc = subprocess.run([sys.executable, "-m", "rlcore", *map(str, args)], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([sys.executable, "-m", "rlcore", *map(str, args)], capture_output=True, text=True,
+                          timeout=300)
     if check and proc.returncode != 0:
         raise AssertionError(f"rlcore {' '.join(map(str, args))} failed ({proc.returncode}):\n{proc.stderr}")
     return proc
@@ -230,7 +231,8 @@ def test_the_library_points_to_the_book_for_experiments(capsys):
 
     assert main(["experiments", "run", "dqn-cartpole", "--jobs", "2"]) == 2
     err = capsys.readouterr().err
-    assert err.strip() == "error: the book's experiments are run by `python -m rlbook experiments run dqn-cartpole --jobs 2`"
+    assert err.strip() == ("error: the book's experiments are run by "
+                           "`python -m rlbook experiments run dqn-cartpole --jobs 2`")
 
 
 def test_dppo_refuses_bad_values_the_same_way(tmp_path, capsys):

@@ -24,8 +24,9 @@ TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
     ex.RunSpec("dqn", "dqn", "CartPole-v1", 600, (0,), {"learning_starts": 100, "train_freq": 4, "gradient_steps": 1,
                                                         "eval_every": 300, "hidden": [16]}),
     # long enough to be stopped part of the way: a checkpoint every 250 steps
-    ex.RunSpec("long", "dqn", "CartPole-v1", 4_000, (0,), {"learning_starts": 100, "train_freq": 4, "gradient_steps": 1,
-                                                           "eval_every": 1_000, "hidden": [16], "checkpoint_every": 250}),
+    ex.RunSpec("long", "dqn", "CartPole-v1", 4_000, (0,), {"learning_starts": 100, "train_freq": 4,
+                                                           "gradient_steps": 1, "eval_every": 1_000, "hidden": [16],
+                                                           "checkpoint_every": 250}),
 ))
 HERE = Path(__file__).parent
 

@@ -41,9 +41,9 @@ def killed_and_restarted(tmp_path_factory):
     updates were logged and checkpointed); torchrun restarts the job once, and it resumes from the checkpoint."""
     out = tmp_path_factory.mktemp("dppo") / "run"
     marker = out.parent / "killed"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--standalone", "--max-restarts", "1",
-           "-m", "_dppo_dies_once", "--env", "Pendulum-v1", "--steps", str(BUDGET), "--seed", "3", "--out", str(out),
-           "--no-progress", "--dump-params", str(out / "dump"), *TINY]
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--standalone",
+           "--max-restarts", "1", "-m", "_dppo_dies_once", "--env", "Pendulum-v1", "--steps", str(BUDGET),
+           "--seed", "3", "--out", str(out), "--no-progress", "--dump-params", str(out / "dump"), *TINY]
     env = {**os.environ, "RLCORE_TEST_DIE_ONCE": str(marker),
            "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, timeout=300)
@@ -56,7 +56,8 @@ def test_workers_hold_identical_weights_optimizer_and_statistics(killed_and_rest
     out, _ = killed_and_restarted
     r0, r1 = load_checkpoint(out / "dump" / "rank0.pt"), load_checkpoint(out / "dump" / "rank1.pt")
     assert r0["step"] == BUDGET and r0["iteration"] == BUDGET // PER_UPDATE
-    for key in ("agent", "optimizer", "kl_coef", "obs_mean", "obs_var", "obs_count", "ret_mean", "ret_var", "ret_count"):
+    for key in ("agent", "optimizer", "kl_coef", "obs_mean", "obs_var", "obs_count", "ret_mean", "ret_var",
+                "ret_count"):
         assert _same(r0[key], r1[key]), key
     assert r0["optimizer"]["state"], "the optimizer took steps"
     ckpt = load_checkpoint(out / "checkpoint.pt")
@@ -157,8 +158,8 @@ def test_half_a_torchrun_environment_is_a_clear_error(monkeypatch):
 def test_sharing_rollouts_keeps_the_workers_identical(tmp_path):
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--standalone",
-           "-m", "rlcore.dppo", "--env", "Pendulum-v1", "--steps", str(4 * PER_UPDATE), "--seed", "1", "--out", str(out),
-           "--no-progress", "--dump-params", str(out / "dump"), *TINY, "--set", "share=rollouts"]
+           "-m", "rlcore.dppo", "--env", "Pendulum-v1", "--steps", str(4 * PER_UPDATE), "--seed", "1",
+           "--out", str(out), "--no-progress", "--dump-params", str(out / "dump"), *TINY, "--set", "share=rollouts"]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert done.returncode == 0, done.stdout + done.stderr
     r0, r1 = load_checkpoint(out / "dump" / "rank0.pt"), load_checkpoint(out / "dump" / "rank1.pt")
@@ -200,7 +201,8 @@ def test_two_nodes_of_one_worker_train_the_two_worker_run(tmp_path):
         runs[name] = out
     one, two = runs["one-node"], runs["two-nodes"]
     meta = json.loads((two / "meta.json").read_text())
-    assert meta["distributed"]["world_size"] == 2 and meta["command"].startswith("torchrun --nnodes 2 --nproc_per_node 1")
+    assert meta["distributed"]["world_size"] == 2
+    assert meta["command"].startswith("torchrun --nnodes 2 --nproc_per_node 1")
     for rank in (0, 1):
         a, b = load_checkpoint(one / "dump" / f"rank{rank}.pt"), load_checkpoint(two / "dump" / f"rank{rank}.pt")
         assert a["iteration"] == 4 and _same(a, b), rank

@@ -166,7 +166,8 @@ def test_run_writes_small_results_and_is_resumable(tiny, tmp_path):
     loaded = ex.load_experiment("tiny", results)
     assert all(not r.missing for r in loaded.values())
     folder = results / "tiny" / "dqn" / "seed-0"
-    assert sorted(p.name for p in folder.iterdir()) == ["config.json", "eval.csv", "meta.json", "policy.pt", "progress.csv"]
+    assert sorted(p.name for p in folder.iterdir()) == ["config.json", "eval.csv", "meta.json", "policy.pt",
+                                                         "progress.csv"]
     policy = load_checkpoint(folder / "policy.pt")
     assert "replay" not in policy and "optimizer" not in policy and policy["step"] == 600
     assert json.loads((folder / "meta.json").read_text())["versions"]["torch"]
@@ -198,7 +199,8 @@ def test_snapshot_shows_a_seed_in_training_until_it_finishes(tiny, tmp_path):
     assert snap.evals["step"].tolist() == [300, 600] and snap.config["config"]["hidden"] == [16]
     assert f"holds a snapshot of its logs at step {last:,}" in ex.status_lines("tiny", results, work)[-1]
     assert ex.snapshot_one("tiny", spec, 0, results, tmp_path / "elsewhere", policy=True) == (
-        f"tiny/dqn/seed-0: nothing to snapshot, no training episode in {tmp_path / 'elsewhere' / 'tiny' / 'dqn' / 'seed-0'} yet")
+        f"tiny/dqn/seed-0: nothing to snapshot, no training episode in "
+        f"{tmp_path / 'elsewhere' / 'tiny' / 'dqn' / 'seed-0'} yet")
     text = ex.snapshot_markdown("tiny", run)
     assert text.startswith(f"Seed 0 had not finished when its snapshot was taken: `results/tiny/dqn/seed-0/` "
                            f"holds a snapshot of its logs at "
@@ -240,14 +242,16 @@ def test_unknown_experiment():
 def test_first_step_reaching_and_tables():
     import numpy as np
 
-    evals = {"step": np.array([10, 20, 30]), "mean_return": np.array([100.0, 480.0, 400.0]), "episodes": np.array([5, 5, 5])}
+    evals = {"step": np.array([10, 20, 30]), "mean_return": np.array([100.0, 480.0, 400.0]),
+             "episodes": np.array([5, 5, 5])}
     assert ex.first_step_reaching(evals, 475) == 20
     assert ex.first_step_reaching(evals, 500) is None
     assert ex.first_step_reaching({}, 1) is None
     spec = ex.RunSpec("dqn", "dqn", "CartPole-v1", 30, (0,))
     run = ex.RunResults(spec, [ex.SeedResult(0, None, {}, evals, {}, {})], [])
     rows = ex.seeds_table(run, 475)
-    assert rows == [{"seed": 0, "final_step": 30, "final_mean_return": 400.0, "eval_episodes": 5, "first_step_reaching": 20}]
+    assert rows == [{"seed": 0, "final_step": 30, "final_mean_return": 400.0, "eval_episodes": 5,
+                     "first_step_reaching": 20}]
     md = ex.markdown_table(rows, {"seed": "seed", "first_step_reaching": "first step ≥ 475"})
     assert md.splitlines() == ["| seed | first step ≥ 475 |", "|---|---|", "| 0 | 20 |"]
     assert "—" in ex.markdown_table([{"a": None}])
@@ -325,7 +329,8 @@ def test_ddpg_sweep_arms_change_one_setting_of_the_report_table_and_modern_runs_
         # Humanoid adds observation normalization, and only that
         assert changed <= {"eval_every", "checkpoint_every"} | ({"normalize_obs"} if run.name == "humanoid" else set())
         assert (run.steps, run.seeds) == (1_000_000, modern.seeds)
-    assert Config(**long["humanoid"].overrides).normalize_obs and not Config(**long["halfcheetah"].overrides).normalize_obs
+    assert Config(**long["humanoid"].overrides).normalize_obs
+    assert not Config(**long["halfcheetah"].overrides).normalize_obs
     assert long["halfcheetah"].env_id == modern.env_id
 
 
@@ -436,7 +441,8 @@ def test_a_continued_run_is_its_source_run_trained_on(monkeypatch, tmp_path):
                                                                  "batch_size": 32, "eval_every": 200,
                                                                  "eval_episodes": 1, "checkpoint_every": 200})
     exp = ex.Experiment("tiny-td3", "a test experiment", (
-        base, replace(base, name="long", steps=800, continues="tiny-td3/short"), replace(base, name="direct", steps=800)))
+        base, replace(base, name="long", steps=800, continues="tiny-td3/short"),
+        replace(base, name="direct", steps=800)))
     monkeypatch.setitem(ex.EXPERIMENTS, "tiny-td3", lambda: exp)
     results, work = tmp_path / "results", tmp_path / "runs"
     with pytest.raises(ValueError, match="not finished"):  # the source seed must be finished first
@@ -456,7 +462,8 @@ def test_a_continued_run_is_its_source_run_trained_on(monkeypatch, tmp_path):
     for key, tensor in direct["actor"].items():
         assert torch.equal(long["actor"][key], tensor), key
     # a continued run keeps its source's settings
-    other = replace(base, name="other", steps=800, continues="tiny-td3/short", overrides={**base.overrides, "tau": 0.01})
+    other = replace(base, name="other", steps=800, continues="tiny-td3/short",
+                    overrides={**base.overrides, "tau": 0.01})
     monkeypatch.setitem(ex.EXPERIMENTS, "tiny-td3", lambda: replace(exp, runs=(*exp.runs, other)))
     with pytest.raises(ValueError, match="other settings"):
         ex.run_experiment("tiny-td3", only=["other"], results=results, work=work, progress=False)

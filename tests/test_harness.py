@@ -98,7 +98,8 @@ def test_an_interrupted_run_resumes_to_exactly_the_uninterrupted_one(tmp_path, s
 def test_evaluations_checkpoints_and_the_end(tmp_path, monkeypatch):
     saved = []
     real = harness.save_checkpoint
-    monkeypatch.setattr(harness, "save_checkpoint", lambda path, state: (saved.append(state["step"]), real(path, state)))
+    monkeypatch.setattr(harness, "save_checkpoint",
+                        lambda path, state: (saved.append(state["step"]), real(path, state)))
     run, net, box = toy_run(tmp_path, steps=10)
     assert saved == [5, 10]  # every checkpoint_every steps, and at the end
     assert run.eval_steps.tolist() == [4, 8] and run.eval_returns.shape == (2,)
@@ -217,7 +218,8 @@ def test_a_checkpoint_without_a_tracked_key_is_refused_in_one_line(tmp_path):
     toy_run(tmp_path, steps=10, target=20)  # an unfinished run, as a resume finds it
     ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
     del ckpt["opt"]  # say, a replay memory the checkpoint was written without
-    save_checkpoint(tmp_path / "checkpoint.pt", {k: v for k, v in ckpt.items() if k not in ("format", "format_version")})
+    save_checkpoint(tmp_path / "checkpoint.pt",
+                    {k: v for k, v in ckpt.items() if k not in ("format", "format_version")})
     with pytest.raises(ValueError) as err:
         toy_run(tmp_path, steps=10, target=20)
     message = str(err.value)
@@ -284,5 +286,6 @@ def test_a_ctrl_c_during_a_checkpoint_write_waits_for_the_write(tmp_path, monkey
     finally:
         signal.signal(signal.SIGINT, previous)
     ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
-    assert ckpt["step"] == 5 and not ckpt["complete"]  # the first periodic checkpoint was written whole, then it stopped
+    # the first periodic checkpoint was written whole, then it stopped
+    assert ckpt["step"] == 5 and not ckpt["complete"]
     assert read_csv(tmp_path / "progress.csv")["step"].tolist() == [3]

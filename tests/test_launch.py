@@ -35,7 +35,8 @@ def test_several_nodes_meet_at_a_rendezvous_instead_of_standalone():
 
 
 def test_children_and_rank_of_a_started_process():
-    code = "import subprocess, sys, time; subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)']); time.sleep(30)"
+    code = ("import subprocess, sys, time; "
+            "subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)']); time.sleep(30)")
     parent = subprocess.Popen([sys.executable, "-c", code], env={**os.environ, "RANK": "7"})
     try:
         deadline = time.time() + 20

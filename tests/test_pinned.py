@@ -5,7 +5,8 @@ A refactoring of the loops (the training harness, the on-policy core) must not c
 fails on any change that does. The same code and seed give different bits on different CPUs (MKL takes other
 kernels on AMD than on Intel; the last digits differ, and training amplifies them), so the file holds one set of
 pins per CPU it was recorded on (:func:`rlcore.machine.cpu_model`: vendor, model, PyTorch's CPU capability), and a
-run must reproduce the pins of one of them. A change that *means* to change training (a fixed bug) re-records the pins with
+run must reproduce the pins of one of them. A change that *means* to change training (a fixed bug) re-records the
+pins with
 
     python tests/test_pinned.py --record          # this CPU's pins only; the others are dropped
 

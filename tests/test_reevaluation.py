@@ -95,7 +95,8 @@ def test_stored_final_returns_are_read_back_with_provenance_and_ignored_once_the
     record = json.loads(path.read_text())
     (record,) = record["records"]
     value = record["value"]
-    assert len(value["returns"]) == 2 and value["lengths"] == [200, 200] and record["params"]["first_reset_seed"] == 10_000
+    assert len(value["returns"]) == 2 and value["lengths"] == [200, 200]
+    assert record["params"]["first_reset_seed"] == 10_000
     assert {"command", "commit", "versions", "machine"} <= set(record) and record["machine"]["cpu"] == cpu_model()
     reevaluation._FINALS.clear()
     live = np.array([evaluate_policy(s.policy, _pendulum(), 2, seed=s.seed + 10_000).mean() for s in run.seeds])

@@ -158,7 +158,8 @@ def test_an_unknown_mujoco_gl_is_set_aside_before_mujoco_is_imported(fake_system
     monkeypatch.delitem(sys.modules, "mujoco", raising=False)
     assert gl.set_aside_unknown_backend() == "egl"
     assert os.environ["MUJOCO_GL"] == "disable"
-    with pytest.raises(HeadlessGLError, match=r"(?s)MUJOCO_GL=egl: not a backend MuJoCo knows on Darwin.*unset MUJOCO_GL"):
+    with pytest.raises(HeadlessGLError,
+                       match=r"(?s)MUJOCO_GL=egl: not a backend MuJoCo knows on Darwin.*unset MUJOCO_GL"):
         select_gl_backend()
     for known in ("glfw", "cgl", "", "disable"):
         monkeypatch.setenv("MUJOCO_GL", known)

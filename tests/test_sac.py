@@ -1,4 +1,5 @@
-"""rlcore.sac: the squashing correction three ways, action boxes, the soft target and the temperature by hand, resume."""
+"""rlcore.sac: the squashing correction three ways, action boxes, the soft target and the temperature by hand,
+resume."""
 
 import math
 
@@ -45,7 +46,8 @@ def test_the_naive_correction_is_wrong_where_tanh_saturates():
     assert abs(float(naive[2] - exact[2])) > 5  # log(1e-6) = -13.8 instead of -22.6
 
 
-@pytest.mark.parametrize("low,high", [([-0.4] * 3, [0.4] * 3), ([-1.0] * 3, [1.0] * 3), ([0.0, -2.0, 1.0], [2.0, 2.0, 1.5])])
+@pytest.mark.parametrize("low,high", [([-0.4] * 3, [0.4] * 3), ([-1.0] * 3, [1.0] * 3),
+                                     ([0.0, -2.0, 1.0], [2.0, 2.0, 1.5])])
 def test_actions_fill_the_task_s_box_and_the_mean_action_is_its_centre_plus_half_width_tanh_m(low, high):
     torch.manual_seed(0)
     actor = sac.SquashedGaussianActor(4, 3, (16,), low, high)
