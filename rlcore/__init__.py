@@ -14,13 +14,15 @@ The algorithms, each a ``Config``, the math as small functions, and a ``train`` 
 - :mod:`rlcore.ddpg`        DDPG
 - :mod:`rlcore.td3`         TD3: clipped double Q, target-policy smoothing, delayed updates
 - :mod:`rlcore.sac`         SAC: maximum entropy, a squashed Gaussian policy, automatic temperature
+- :mod:`rlcore.crossq`      CrossQ: SAC with no target networks, batch renorm and one joint critic pass
 
 What they share:
 
 - :mod:`rlcore.onpolicy`    the on-policy core of A2C, PPO, DPPO and REINFORCE: their shared Config, actor-critic,
                             rollouts, GAE
-- :mod:`rlcore.offpolicy`   the off-policy core of DDPG, TD3 and SAC: the loop and its per-update hook, actor, critics
+- :mod:`rlcore.offpolicy`   the off-policy core of DDPG, TD3, SAC and CrossQ: the loop and its per-update hook, actor, critics
 - :mod:`rlcore.harness`     everything around a training loop: resume, checkpoints, logs, evaluation, best policy
+- :mod:`rlcore.batchrenorm` batch renormalization (Ioffe 2017): batch norm that corrects toward running statistics
 - :mod:`rlcore.nets`        ``mlp()`` and the Q-network, dueling, actor and critic heads
 - :mod:`rlcore.buffers`     replay buffer, sum tree, prioritized replay
 - :mod:`rlcore.noise`       Gaussian, Ornstein-Uhlenbeck and adaptive parameter noise

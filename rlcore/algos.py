@@ -8,7 +8,7 @@ Each name maps to a module that provides:
 - ``load_policy(checkpoint) -> policy``: the deterministic policy, a callable from observation to action.
 
 Later chapters add their algorithms here (``dqn``, ``a2c``, ``reinforce``, ``ppo``, ``dppo``, ``ddpg``, ``td3``,
-``sac``).
+``sac``, ``crossq``).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ ALGORITHMS: dict[str, str] = {
     "ddpg": "rlcore.ddpg",
     "td3": "rlcore.td3",
     "sac": "rlcore.sac",
+    "crossq": "rlcore.crossq",
 }
 
 

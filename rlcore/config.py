@@ -81,7 +81,7 @@ def check_config(config: Any) -> None:
     ranges = {**RANGES, **getattr(type(config), "RANGES", {})}
     for f in dataclasses.fields(config):
         value, hint, name = getattr(config, f.name), hints.get(f.name), f"{owner}.{f.name}"
-        if f.name == "hidden":
+        if f.name == "hidden" or f.name.endswith("_hidden"):
             if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
                 raise ValueError(f"{name} must be a list of layer sizes such as 64,64, got {value!r}")
             sizes = tuple(int(_number(name, h, integer=True)) for h in value)
