@@ -429,7 +429,7 @@ def _crossq_humanoid() -> Experiment:
     return Experiment(
         "crossq-humanoid",
         "CrossQ on Humanoid-v5, the paper's settings with 1024-wide critics, 300k steps, 3 seeds",
-        (RunSpec("crossq-humanoid", "crossq", "Humanoid-v5", 300_000, (0, 1, 2), CROSSQ_HUMANOID,
+        (RunSpec("crossq-1024", "crossq", "Humanoid-v5", 300_000, (0, 1, 2), CROSSQ_HUMANOID,
                  "CrossQ on Humanoid-v5, critics 1024 x 1024, 300k steps"),),
     )
 
