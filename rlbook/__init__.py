@@ -39,7 +39,8 @@ The package, one idea a module. It imports :mod:`rlcore`; :mod:`rlcore` never im
 - :mod:`rlbook.course_report`: the course report's tables, as printed;
 - :mod:`rlbook.record_plots`: plots of the book's records (DPPO's scaling, a critic trace);
 - chapter helpers: :mod:`rlbook.tabular_seeds` (tabular seeds in a reused process pool),
-  :mod:`rlbook.tabular_plots`, :mod:`rlbook.mujoco_analysis`, :mod:`rlbook.overestimation`;
+  :mod:`rlbook.tabular_plots`, :mod:`rlbook.mujoco_analysis`, :mod:`rlbook.overestimation`,
+  :mod:`rlbook.crossq_demo` (a batch like a replay memory's, for chapter 9's batch-norm demonstration);
 - :mod:`rlbook.__main__`: ``python -m rlbook experiments ...``.
 
 Everything is importable from ``rlbook`` itself.
