@@ -32,7 +32,7 @@ from rlcore.buffers import Batch, PrioritizedReplayBuffer, ReplayBuffer
 from rlcore.config import NON_NEGATIVE, check_budget, check_config, config_from_dict
 from rlcore.envs import episode_seed, make_env
 from rlcore.evaluate import discounted_return, episode_rewards
-from rlcore.harness import EPISODE_COLUMNS, EVAL_COLUMNS, Evaluation, Run, torch_rng
+from rlcore.harness import EPISODE_COLUMNS, EVAL_COLUMNS, Evaluation, Run, learning_starts_on_resume, torch_rng
 from rlcore.nets import DuelingQNetwork, QNetwork, soft_update
 from rlcore.schedules import linear_schedule
 
@@ -95,7 +95,11 @@ class Config:
     """Write checkpoint.pt every this many steps (and at the end, and on Ctrl-C)."""
     replay_in_checkpoint: bool = True
     """Save the replay memory in the checkpoint. A run resumed from a checkpoint written at an episode's end is
-    then exactly the uninterrupted run; one stopped mid-episode restarts that episode."""
+    then exactly the uninterrupted run; one stopped mid-episode restarts that episode. Without it (False: smaller
+    checkpoints), a resumed run starts with an empty memory and refills it before it learns again: for
+    ``learning_starts`` steps it acts epsilon-greedily as the schedule has it at that step (uniformly only while the
+    step is still below ``learning_starts``) and does not learn, and it says so in one line
+    (:func:`rlcore.harness.learning_starts_on_resume`)."""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments for ``gymnasium.make``."""
 
@@ -277,6 +281,7 @@ def train(
     run.restores(q=q, q_target=q_target, optimizer=optimizer, replay=buffer if config.replay_in_checkpoint else None,
               rng=rng, torch_rng=torch_rng())
     step, episode = run.resume(step=0, episode=0)
+    learning_starts = learning_starts_on_resume(step, buffer, config.learning_starts)  # later without the memory
     # [dqn-schedule]
     decay_steps = int(config.exploration_fraction * steps)
     # [/dqn-schedule]
@@ -302,7 +307,7 @@ def train(
                 obs, _ = env.reset(seed=episode_seed(seed, episode))
 
             # [dqn-learn]
-            if step >= config.learning_starts and step % config.train_freq == 0:
+            if step >= learning_starts and step % config.train_freq == 0:
                 beta = config.per_beta_start + (1.0 - config.per_beta_start) * min(step / steps, 1.0)
                 for _ in range(config.gradient_steps):
                     batch = (buffer.sample(config.batch_size, beta) if config.prioritized

@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import os
 import signal
+import sys
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -91,6 +92,19 @@ def running_stats(rms: Any, prefix: str, loaded: Callable[[], None] | None = Non
 def crossed(every: int, now: int, before: int) -> bool:
     """Whether a counter that went from ``before`` to ``now`` passed a multiple of ``every`` (never if 0)."""
     return bool(every) and now // every > before // every
+
+
+def learning_starts_on_resume(step: int, memory: Any, learning_starts: int) -> int:
+    """The step from which a replay-memory run that has just resumed at ``step`` learns: ``learning_starts``, as
+    ever, unless it resumed without its memory (``replay_in_checkpoint=False``: ``memory`` is empty past step 0).
+    Then it acts as it would have, without learning, for ``learning_starts`` more steps to fill the memory again,
+    so that its first minibatches are not drawn from a handful of transitions; one line on stderr says so."""
+    if step == 0 or len(memory) > 0 or learning_starts == 0:
+        return learning_starts
+    until = step + learning_starts
+    tqdm.write(f"resumed at step {step:,} without the replay memory (replay_in_checkpoint=False): refilling it for "
+               f"{learning_starts:,} steps, learning again from step {until:,}", file=sys.stderr)
+    return until
 
 
 @dataclass

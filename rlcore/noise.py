@@ -173,8 +173,10 @@ def noise_sigma(noise: Any, param_noise: AdaptiveParamNoise | None) -> float:
 
 
 def exploration_state(noise: Any, param_noise: AdaptiveParamNoise | None, actor: nn.Module) -> Saved:
-    """The noise's generator and state in a checkpoint (``noise``), so that a resumed run continues as if never
-    stopped; a checkpoint from before rlcore saved them restores only the scale (``noise_sigma``)."""
+    """The noise's generator and state in a checkpoint (``noise``, beside its scale ``noise_sigma``), so that a
+    resumed run continues as if never stopped. A checkpoint without ``noise`` (from before rlcore saved it) cannot
+    resume the run: :meth:`rlcore.harness.Run.resume` refuses it in one line, as any checkpoint that lacks what the
+    run restores."""
     source = param_noise if param_noise is not None else noise
 
     def save() -> dict[str, Any]:
@@ -182,12 +184,10 @@ def exploration_state(noise: Any, param_noise: AdaptiveParamNoise | None, actor:
                 **({"noise": source.state_dict()} if source is not None else {})}
 
     def load(ckpt: dict[str, Any]) -> None:
-        if "noise" in ckpt and param_noise is not None:
+        if param_noise is not None:
             param_noise.load_state_dict(ckpt["noise"], actor)
-        elif "noise" in ckpt and noise is not None:
+        elif noise is not None:
             noise.load_state_dict(ckpt["noise"])
-        elif hasattr(source, "sigma"):
-            source.sigma = float(ckpt["noise_sigma"])
 
     return Saved(save, load)
 

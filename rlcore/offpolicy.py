@@ -35,7 +35,7 @@ from torch import nn
 from rlcore.buffers import ReplayBuffer
 from rlcore.config import config_from_dict
 from rlcore.envs import ObservationScaler, episode_seed, make_env, normalize_observation
-from rlcore.harness import Evaluation, Run, evaluation, running_stats
+from rlcore.harness import Evaluation, Run, evaluation, learning_starts_on_resume, running_stats
 from rlcore.nets import mlp
 
 
@@ -70,7 +70,11 @@ class OffPolicyConfig:
     """Write checkpoint.pt every this many steps (and at the end, and on Ctrl-C)."""
     replay_in_checkpoint: bool = True
     """Save the replay memory in the checkpoint. A resumed run is then exactly the uninterrupted run, also when it
-    was stopped mid-episode: the checkpoint holds the episode in progress (:func:`rlcore.envs.restore_episode`)."""
+    was stopped mid-episode: the checkpoint holds the episode in progress (:func:`rlcore.envs.restore_episode`).
+    Without it (False: smaller checkpoints), a resumed run starts with an empty memory and refills it before it
+    learns again: for ``learning_starts`` steps it acts with its behaviour policy (the current actor and its
+    exploration; uniformly random only while the step is still below ``learning_starts``) and does not learn, and it
+    says so in one line (:func:`rlcore.harness.learning_starts_on_resume`)."""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """Keyword arguments for ``gymnasium.make``."""
 
@@ -367,12 +371,16 @@ class OffPolicyLoop:
         self.on_update = on_update
         self.step = self.episode = 0
         self.obs: np.ndarray | None = None
+        self.learning_starts = config.learning_starts
+        """The step learning starts at: ``config.learning_starts``, or later after a resume without the memory."""
 
     def resume(self) -> int:
         """Restore what the run restores from its checkpoint (if any), and the episode in progress; the step to go
-        on from."""
+        on from. A resume without the replay memory learns again only once it has refilled it
+        (:attr:`learning_starts`)."""
         self.step, self.episode = self.run.resume(step=0, episode=0)
         self.obs = self.run.resume_episode(self.env, reset_seed=episode_seed(self.seed, self.episode))
+        self.learning_starts = learning_starts_on_resume(self.step, self.buffer, self.config.learning_starts)
         return self.step
 
     def run_until(self, steps: int, act: Callable[[np.ndarray], np.ndarray], learn: Callable[[int, Minibatch], None],
@@ -401,7 +409,7 @@ class OffPolicyLoop:
                     self.obs, _ = env.reset(seed=episode_seed(self.seed, self.episode))
                     if episode_ended is not None:
                         episode_ended()
-                if self.step >= config.learning_starts:
+                if self.step >= self.learning_starts:
                     mb = Minibatch.sample(self.buffer, config.batch_size, self.observations)
                     if self.on_update is not None:
                         self.on_update(Update(self.step, mb, critic, lambda: targets(mb)))
