@@ -17,7 +17,7 @@ critics and the actor, and one joint forward pass of (s, a) and (s', a') through
 Everything else is SAC's (:mod:`rlcore.sac`: the squashed Gaussian policy, its log-probability, the temperature).
 Batch renormalization (:mod:`rlcore.batchrenorm`) normalizes by the batch in a training pass and by its running
 statistics otherwise: the actor acts, and the critic scores the actor's actions, with the running statistics; the
-critic's joint pass and the actor's own update use batch statistics, as in the authors' and sb3-contrib's code.
+critic's joint pass and the actor's own update use batch statistics, as in sb3-contrib's code.
 
 Two switches take it apart for the chapter's ablation: ``batch_norm=False`` is SAC without target networks (and with
 CrossQ's other settings); ``joint_pass=False`` normalizes (s, a) and (s', a') apart, each by its own batch.
