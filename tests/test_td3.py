@@ -106,6 +106,47 @@ def test_with_its_three_devices_off_td3_is_ddpg_bit_for_bit():
     assert not torch.equal(next(plain.actor.parameters()), next(on.actor.parameters()))
 
 
+# The arms of chapter 8's experiments, each against DDPG with the same settings and seed: each device alone on DDPG
+# (section 8.1's critic traces) and each device removed from TD3 (its ablation, rlbook's TD3_ABLATION)
+DEVICES_CHANGED = {
+    "td3": {}, "clipped-double-q-alone": {"target_policy_noise": 0.0, "policy_delay": 1},
+    "smoothing-alone": {"clipped_double_q": False, "policy_delay": 1},
+    "delay-alone": {"clipped_double_q": False, "target_policy_noise": 0.0},
+    "no-clipped-double-q": {"clipped_double_q": False}, "no-smoothing": {"target_policy_noise": 0.0},
+    "no-delay": {"policy_delay": 1},
+    "none": {"clipped_double_q": False, "target_policy_noise": 0.0, "policy_delay": 1},
+}
+
+
+@pytest.mark.parametrize("arm", list(DEVICES_CHANGED))
+def test_what_each_ablation_arm_shares_with_ddpg_s_run(arm):
+    """Chapter 8's claim, arm by arm: the actor's initial weights, the random actions and the first minibatch are
+    DDPG's in every arm; the critics' initial weights only where there is one critic (two are drawn as one tensor)."""
+    torch.set_num_threads(1)
+    sp = {"obs_dim": 3, "act_dim": 1, "low": np.array([-2.0]), "high": np.array([2.0])}
+    changed = DEVICES_CHANGED[arm]
+    torch.manual_seed(5)
+    d_actor, d_critic, _, _ = ddpg.make_networks(sp, ddpg.Config(**SMALL))
+    torch.manual_seed(5)
+    t_actor, t_critic, _, _ = td3.make_networks(sp, td3.Config(**SMALL, **changed))
+    assert all(torch.equal(a, b) for a, b in zip(d_actor.state_dict().values(), t_actor.state_dict().values()))
+    one_critic = not td3.Config(**SMALL, **changed).clipped_double_q
+    same_critic = type(d_critic) is type(t_critic) and all(
+        torch.equal(a, b) for a, b in zip(d_critic.state_dict().values(), t_critic.state_dict().values()))
+    assert same_critic == one_critic
+
+    def first_minibatch(train, config):
+        seen = []
+        train("Pendulum-v1", config, steps=SMALL["learning_starts"] + 1, seed=5,
+              on_update=lambda u: seen.append((u.minibatch.obs.clone(), u.minibatch.actions.clone())))
+        return seen[0]
+
+    common = dict(SMALL, actor_lr=1e-3, critic_lr=1e-3)
+    d_obs, d_act = first_minibatch(ddpg.train, ddpg.Config(**common, noise_sigma=0.1))
+    t_obs, t_act = first_minibatch(td3.train, td3.Config(**common, exploration_noise=0.1, **changed))
+    assert torch.equal(d_obs, t_obs) and torch.equal(d_act, t_act)
+
+
 def test_the_actor_is_updated_every_second_step(monkeypatch):
     calls = []
     real = td3.update_actor
