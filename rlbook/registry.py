@@ -434,6 +434,42 @@ def _crossq_humanoid() -> Experiment:
     )
 
 
+def _td3_sac_ant() -> Experiment:
+    # Chapter 8 on the course report's fourth body, where DDPG with modern settings ends its 250k steps near -100
+    # (ddpg-modern): td3-sac-1m's settings and evaluations on Ant-v5 (observations as they are, as on Hopper and
+    # HalfCheetah), 3 seeds x 1M.
+    return Experiment(
+        "td3-sac-ant",
+        "TD3 and SAC at 1M steps on Ant-v5, td3-sac-1m's settings, 3 seeds",
+        tuple(RunSpec(f"{algo}-ant", algo, "Ant-v5", 1_000_000, (0, 1, 2), {**hp, **_OFFPOLICY_1M_EVALS},
+                      f"{algo.upper()} on Ant-v5, 1M steps") for algo, hp in (("td3", TD3_1M), ("sac", SAC_1M))),
+    )
+
+
+# Chapter 9's lesson, one piece at a time, on a body cheap enough for 2 seeds an arm: Hopper-v5, 100k steps (at 256
+# wide, about a twentieth of a Humanoid step's arithmetic). Every arm has CrossQ's settings (no target networks,
+# Adam beta1 0.5, step size 1e-3, policy delay 3); they differ in the normalization, the pass and the width.
+CROSSQ_ABLATION: dict[str, tuple[dict[str, Any], str]] = {
+    "no-target": ({"batch_norm": False, "critic_hidden": (256, 256)},
+                  "SAC without target networks (CrossQ's settings, no batch norm), critics 256"),
+    "bn-separate": ({"joint_pass": False, "critic_hidden": (256, 256)},
+                    "+ batch renorm, (s, a) and (s', a') in separate passes, critics 256"),
+    "crossq-256": ({"critic_hidden": (256, 256)}, "+ the joint pass: CrossQ, critics 256"),
+    "crossq-1024": ({"critic_hidden": (1024, 1024)}, "CrossQ, critics 1024"),
+}
+
+
+def _crossq_ablation() -> Experiment:
+    evals = {"eval_every": 5_000, "eval_episodes": 5, "checkpoint_every": 10_000}
+    return Experiment(
+        "crossq-ablation",
+        "CrossQ taken apart on Hopper-v5: no target network alone, + batch renorm with separate passes, + the joint "
+        "pass, and critics 256 against 1024; 100k steps, 2 seeds",
+        tuple(RunSpec(name, "crossq", "Hopper-v5", 100_000, (0, 1), {**evals, **change}, label)
+              for name, (change, label) in CROSSQ_ABLATION.items()),
+    )
+
+
 EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "dqn-cartpole": _dqn_cartpole,
     "dqn-lunarlander": _dqn_lunarlander,
@@ -452,6 +488,8 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "td3-ablation": _td3_ablation,
     "td3-sac-humanoid-2m": _td3_sac_humanoid_2m,
     "crossq-humanoid": _crossq_humanoid,
+    "td3-sac-ant": _td3_sac_ant,
+    "crossq-ablation": _crossq_ablation,
 }
 
 

@@ -467,3 +467,24 @@ def test_a_continued_run_is_its_source_run_trained_on(monkeypatch, tmp_path):
     monkeypatch.setitem(ex.EXPERIMENTS, "tiny-td3", lambda: replace(exp, runs=(*exp.runs, other)))
     with pytest.raises(ValueError, match="other settings"):
         ex.run_experiment("tiny-td3", only=["other"], results=results, work=work, progress=False)
+
+
+def test_chapter_9_experiments_change_one_thing_at_a_time():
+    from rlbook import get_experiment
+    from rlbook.registry import SAC_1M, TD3_1M
+
+    ant = {r.name: r for r in get_experiment("td3-sac-ant").runs}
+    td3_sac = {r.name: r for r in get_experiment("td3-sac-1m").runs}
+    assert set(ant) == {"td3-ant", "sac-ant"}
+    for algo, hp in (("td3", TD3_1M), ("sac", SAC_1M)):
+        # Ant's runs are the Hopper runs' settings on another body
+        assert ant[f"{algo}-ant"].overrides == td3_sac[f"{algo}-hopper"].overrides
+        assert ant[f"{algo}-ant"].steps == 1_000_000 and ant[f"{algo}-ant"].seeds == (0, 1, 2)
+    arms = {r.name: r.overrides for r in get_experiment("crossq-ablation").runs}
+    base = {k: v for k, v in arms["crossq-256"].items()}
+    assert {k: v for k, v in arms["no-target"].items() if k != "batch_norm"} == base
+    assert {k: v for k, v in arms["bn-separate"].items() if k != "joint_pass"} == base
+    assert {k: v for k, v in arms["crossq-1024"].items() if k != "critic_hidden"} == {
+        k: v for k, v in base.items() if k != "critic_hidden"}
+    humanoid = get_experiment("crossq-humanoid").runs[0]
+    assert humanoid.overrides["critic_hidden"] == (1024, 1024) and humanoid.steps == 300_000
