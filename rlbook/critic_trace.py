@@ -48,7 +48,7 @@ def critic_stats(critic: torch.nn.Module, target: Callable[[], torch.Tensor], mb
                 "weight_norms": [float(p.norm()) for p in critic.parameters() if p.dim() >= 2]}
 
 
-TRACEABLE = ("ddpg", "td3", "sac")
+TRACEABLE = ("ddpg", "td3", "sac", "crossq")
 """The algorithms whose train() takes an ``on_update`` hook: the off-policy core's."""
 
 
@@ -97,7 +97,7 @@ def settings_for(algo: str, spec: Any) -> dict[str, Any]:
 
 def trace_seed(experiment: str, run: str, seed: int, steps: int, every: int = 500, progress: bool = False,
                changes: dict[str, Any] | None = None, algo: str | None = None) -> dict[str, Any]:
-    """Re-train ``seed`` of ``experiment/run`` (a DDPG, TD3 or SAC run of the registry) for its first ``steps`` steps
+    """Re-train ``seed`` of ``experiment/run`` (a DDPG, TD3, SAC or CrossQ run of the registry) for its first ``steps`` steps
     with a :class:`CriticProbe`; returns the rows and the re-run's evaluations. ``changes`` overrides Config fields
     of the run, and ``algo`` trains it with another algorithm that takes those fields (``td3`` on a DDPG run: then it
     is a different run, and its evaluations will not match the stored ones)."""
