@@ -106,7 +106,7 @@ def rlcore_config(cfg: dict[str, object]):
     """rlcore's Config for ``cfg`` (:func:`settings`), with evaluation and checkpoints off."""
     module = importlib.import_module(f"rlcore.{cfg['algo']}")
     skip = {"algo", "train_freq", "gradient_steps", "target_entropy"}
-    fields = {k: tuple(v) if k == "hidden" else v for k, v in cfg.items() if k not in skip}
+    fields = {k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items() if k not in skip}  # layer widths
     return module.Config(eval_every=0, checkpoint_every=10**12, **fields)
 
 
@@ -198,14 +198,16 @@ def sb3_model(env, cfg: dict[str, object], seed: int):
                target_entropy="auto", **common)
 
 
-def sb3_run(env_id: str, steps: int, seed: int, cfg: dict[str, object]) -> float:
-    """One SB3 training run: its seconds; where they went is appended to SPLITS['sb3']."""
+def sb3_run(env_id: str, steps: int, seed: int, cfg: dict[str, object],
+            make_model: Callable | None = None) -> float:
+    """One SB3 training run: its seconds; where they went is appended to SPLITS['sb3']. ``make_model(env, cfg,
+    seed)`` builds the model (default :func:`sb3_model`; ``benchmarks/crossq_vs_sb3.py`` passes sb3-contrib's)."""
     import gymnasium as gym
 
     timers = Timers()
     start, cpu_start = time.perf_counter(), time.process_time()
     env = timed_env(gym.make(env_id), timers)
-    model = sb3_model(env, cfg, seed)
+    model = (make_model or sb3_model)(env, cfg, seed)
     model.train = timers.wrap(model.train, "networks")
     model.learn(total_timesteps=steps)
     total, cpu = time.perf_counter() - start, time.process_time() - cpu_start
@@ -235,6 +237,30 @@ def pooled(splits: list[dict[str, float]]) -> dict[str, float]:
             "learning_steps": learning, "ms_per_learning_step_networks": 1e3 * seconds["seconds_networks"] / learning}
 
 
+def timing_record(cfg: dict[str, object], env_id: str, steps: int, repeats: int, times: dict[str, list[float]],
+                  origin: dict[str, object], peer: str = "SB3") -> dict[str, object]:
+    """The record of a side-by-side timing (``times``, from :func:`record.time_side_by_side` of :func:`rlcore_run`
+    and :func:`sb3_run`) with where the time went (:data:`SPLITS`), the same in CPU time and ``origin`` (the
+    command, versions and machine: :func:`record.provenance`), after printing the split and the CPU-time ratio;
+    ``peer``: the other side's name in the printed lines."""
+    shares = {side: {"per_repeat": SPLITS[side], "pooled": pooled(SPLITS[side])} for side in SPLITS}
+    r = shares["rlcore"]["pooled"]
+    print(f"where rlcore's time goes: networks {r['share_networks']:.0%}, simulator {r['share_simulator']:.0%}, "
+          f"acting {r['share_acting']:.0%}, replay sampling {r['share_replay_sampling']:.0%}, the rest "
+          f"{r['share_rest']:.0%}; {peer}'s: train {shares['sb3']['pooled']['share_networks']:.0%}", flush=True)
+    cpu_times = {side: [s["cpu_seconds_total"] for s in SPLITS[side]] for side in SPLITS}
+    cpu = throughput(cpu_times, steps)
+    print(f"in CPU time: rlcore {cpu['env_steps_per_second']['rlcore']:.0f} env-steps/s, {peer} "
+          f"{cpu['env_steps_per_second']['sb3']:.0f}: ratio {cpu['ratio_rlcore_over_sb3']:.2f}x", flush=True)
+    return {
+        "benchmark": f"{cfg['algo']}-vs-sb3", "algo": cfg["algo"], "env_id": env_id, "steps": steps,
+        "repeats": repeats, "hyperparameters": cfg, **throughput(times, steps), "cpu_time": cpu,
+        "rlcore_time_shares": shares["rlcore"]["pooled"], "sb3_time_shares": shares["sb3"]["pooled"],
+        "time_shares_per_repeat": {side: shares[side]["per_repeat"] for side in SPLITS},
+        **origin,
+    }
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--algo", choices=ALGOS, required=True)
@@ -260,24 +286,10 @@ def main() -> None:
     cfg = settings(args.algo, args.learning_starts)
     times = time_side_by_side({"rlcore": rlcore_run, "sb3": sb3_run}, args.env, args.steps, args.seed,
                               args.repeats, cfg)
-    shares = {side: {"per_repeat": SPLITS[side], "pooled": pooled(SPLITS[side])} for side in SPLITS}
-    r = shares["rlcore"]["pooled"]
-    print(f"where rlcore's time goes: networks {r['share_networks']:.0%}, simulator {r['share_simulator']:.0%}, "
-          f"acting {r['share_acting']:.0%}, replay sampling {r['share_replay_sampling']:.0%}, the rest "
-          f"{r['share_rest']:.0%}; SB3's: train {shares['sb3']['pooled']['share_networks']:.0%}", flush=True)
     command = (f"python benchmarks/offpolicy_vs_sb3.py --algo {args.algo} --env {args.env} --steps {args.steps} "
                f"--learning-starts {args.learning_starts} --repeats {args.repeats}")
-    cpu_times = {side: [s["cpu_seconds_total"] for s in SPLITS[side]] for side in SPLITS}
-    cpu = throughput(cpu_times, args.steps)
-    print(f"in CPU time: rlcore {cpu['env_steps_per_second']['rlcore']:.0f} env-steps/s, SB3 "
-          f"{cpu['env_steps_per_second']['sb3']:.0f}: ratio {cpu['ratio_rlcore_over_sb3']:.2f}x", flush=True)
-    record = {
-        "benchmark": f"{args.algo}-vs-sb3", "algo": args.algo, "env_id": args.env, "steps": args.steps,
-        "repeats": args.repeats, "hyperparameters": cfg, **throughput(times, args.steps), "cpu_time": cpu,
-        "rlcore_time_shares": shares["rlcore"]["pooled"], "sb3_time_shares": shares["sb3"]["pooled"],
-        "time_shares_per_repeat": {side: shares[side]["per_repeat"] for side in SPLITS},
-        **provenance(command, load_start, peers=("stable_baselines3",)),
-    }
+    record = timing_record(cfg, args.env, args.steps, args.repeats, times,
+                           provenance(command, load_start, peers=("stable_baselines3",)))
     write_record(record, out, throughput_summary(record))
 
 
