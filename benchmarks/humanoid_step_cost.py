@@ -7,7 +7,9 @@ The settings are the registry's Humanoid-v5 runs (DDPG with the report's two set
 CrossQ), each named ``experiment/run``, and CrossQ with critics of each of ``--widths`` (``crossq-humanoid/crossq-W``,
 runs the registry does not train). Each setting trains on Humanoid-v5 through its own ``train``, twice: ``--warmup`` random steps alone, then the same
 plus ``--steps`` learning steps; the difference, divided by ``--steps``, is what one step of training costs once
-learning has started (the simulator, acting, sampling and the update; the run's start-up cancels out). The settings
+learning has started (the simulator, acting, sampling and the update; the run's start-up cancels out). It is measured in CPU time of the process (``time.process_time``, one torch thread:
+what the step computed, whatever else the machine ran meanwhile; CPU-hours are this), with the wall time beside it
+(which a loaded machine inflates). The settings
 are timed in turn, ``--repeats`` times (the median is kept), so that all see the same machine; each is reported
 against SAC's (``td3-sac-1m/sac-humanoid``), with the hours of one core that 300k and 1M steps take at that rate.
 Writes ``results/benchmarks/humanoid-step-cost.json``; one torch thread, as each experiment process uses.
@@ -46,20 +48,22 @@ def settings(widths: list[int]) -> dict[str, tuple[str, dict]]:
     return out
 
 
-def step_seconds(algo: str, overrides: dict, warmup: int, steps: int) -> float:
-    """Seconds of one training step after learning starts (see the module's docstring)."""
+def step_seconds(algo: str, overrides: dict, warmup: int, steps: int) -> tuple[float, float]:
+    """(CPU seconds of this process, wall seconds) of one training step after learning starts (see the module's
+    docstring)."""
     from rlcore.algos import get_algorithm
 
     module = get_algorithm(algo)
     quiet = {"eval_every": 0, "checkpoint_every": 10**9, "buffer_size": warmup + steps, "learning_starts": warmup}
     config = module.make_config(algo, **{**overrides, **quiet})
     module.train(ENV_ID, config, steps=warmup + 2, seed=0)  # first-use costs (kernels, caches) out of the timing
-    start = time.perf_counter()
+    clocks = [(time.process_time(), time.perf_counter())]
     module.train(ENV_ID, config, steps=warmup, seed=0)
-    middle = time.perf_counter()
+    clocks.append((time.process_time(), time.perf_counter()))
     module.train(ENV_ID, config, steps=warmup + steps, seed=0)
-    end = time.perf_counter()
-    return ((end - middle) - (middle - start)) / steps
+    clocks.append((time.process_time(), time.perf_counter()))
+    (c0, w0), (c1, w1), (c2, w2) = clocks
+    return ((c2 - c1) - (c1 - c0)) / steps, ((w2 - w1) - (w1 - w0)) / steps
 
 
 def critic_layers(algo: str, overrides: dict) -> list[int]:
@@ -88,14 +92,19 @@ def main() -> None:
     plan = settings(widths)
     load_start = os.getloadavg()
     seconds: dict[str, list[float]] = {name: [] for name in plan}
+    wall: dict[str, list[float]] = {name: [] for name in plan}
     for r in range(args.repeats):
         for name, (algo, overrides) in plan.items():
-            seconds[name].append(step_seconds(algo, overrides, args.warmup, args.steps))
-            print(f"round {r + 1}/{args.repeats}, {name}: {1e3 * seconds[name][-1]:.1f} ms a step", flush=True)
+            cpu, clock = step_seconds(algo, overrides, args.warmup, args.steps)
+            seconds[name].append(cpu)
+            wall[name].append(clock)
+            print(f"round {r + 1}/{args.repeats}, {name}: {1e3 * cpu:.1f} ms of CPU a step ({1e3 * clock:.1f} wall)",
+                  flush=True)
     sac = float(np.median(seconds[SAC]))
     rows = [{"setting": name, "algo": algo,
              "critic_hidden": critic_layers(algo, overrides),
              "seconds_per_step": float(np.median(seconds[name])), "seconds_per_round": seconds[name],
+             "wall_seconds_per_step": float(np.median(wall[name])), "wall_seconds_per_round": wall[name],
              "ratio_to_sac": float(np.median(seconds[name])) / sac,
              "core_hours_to_300k": float(np.median(seconds[name])) * 300_000 / 3600,
              "core_hours_to_1m": float(np.median(seconds[name])) * 1_000_000 / 3600}
