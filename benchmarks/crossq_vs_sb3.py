@@ -75,8 +75,8 @@ What differs (none of it changes what an update computes by more than rounding, 
 - the arithmetic: rlcore runs both critics as one module (:class:`rlcore.crossq.NormalizedTwinCritic`: one batched
   matrix product per layer for both, one renorm per layer with two groups of statistics) with PyTorch's fused Adam,
   and freezes the critics while the actor's loss is backpropagated through them; sb3-contrib runs its two critics
-  one after the other, uses the default Adam, and computes the critics' weight gradients in the actor's backward
-  pass too (every 3rd step), then zeroes them: more arithmetic per update;
+  one after the other, uses the default (per-tensor) Adam, and computes the critics' weight gradients in the actor's
+  backward pass too (every 3rd step), then zeroes them: more arithmetic per update;
 - random numbers: the same seed gives each side its own draws (networks, actions, minibatches), so a seed's runs
   differ; sb3-contrib seeds its environment's first reset only, rlcore every episode's.
 """
@@ -328,6 +328,8 @@ def main(argv=None) -> None:
         write(result, f"final deterministic return, mean over seeds: rlcore {m['rlcore']:.1f}, sb3-contrib "
                       f"{m['sb3']:.1f}")
         return
+    for splits in shared.SPLITS.values():  # this timing's alone (the module is shared with anything run before)
+        splits.clear()
     times = time_side_by_side({"rlcore": rlcore_run, "sb3": sb3_run}, args.env, args.steps, args.seed, args.repeats,
                               cfg)
     record = shared.timing_record(cfg, args.env, args.steps, args.repeats, times,
