@@ -250,6 +250,7 @@ def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndar
     """
     T = len(buf.obs)
     for t in range(T):
+        # [rollout-act]
         with torch.no_grad():
             x = torch.as_tensor(obs, dtype=torch.float32)
             dist = agent.distribution(x)
@@ -264,6 +265,7 @@ def collect_rollout(agent: ActorCritic, envs: gym.vector.VectorEnv, obs: np.ndar
         buf.valid[t] = ~buf.ended
         buf.terminated[t], buf.truncated[t] = terminated, truncated
         buf.ended = terminated | truncated
+        # [/rollout-act]
         if "episode" in info and on_episode is not None:
             for i in np.flatnonzero(info["_episode"]):
                 on_episode(t, float(info["episode"]["r"][i]), int(info["episode"]["l"][i]))

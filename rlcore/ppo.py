@@ -173,6 +173,7 @@ def ppo_update(model: nn.Module, optimizer: torch.optim.Optimizer, batch: dict[s
     n = len(b_obs)
     n_batches = n_batches or max(n // config.batch_size, 1)
     stats = []
+    # [ppo-minibatch]
     for _ in range(config.n_epochs):
         for idx in np.array_split(rng.permutation(n), n_batches):
             logp, entropy, value = model(b_obs[idx], b_act[idx])
@@ -190,6 +191,7 @@ def ppo_update(model: nn.Module, optimizer: torch.optim.Optimizer, batch: dict[s
             loss.backward()
             nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm)
             optimizer.step()
+            # [/ppo-minibatch]
             clip_frac = ((ratio - 1.0).abs() > config.clip_range).float().mean()
             stats.append([policy_loss.item(), value_loss.item(), entropy.item(), kl.item(), clip_frac.item()])
     mean_kl = float(np.mean([s[3] for s in stats[-n_batches:]]))  # over the last epoch
