@@ -81,14 +81,25 @@ def scores(cost: dict[str, Any] | None, entries=ENTRIES, milestones=MILESTONES,
     return out
 
 
-def table_rows(board: list[Score]) -> list[dict[str, str]]:
-    """One row per entry, a column per milestone: 'IQM (low to high), n seeds, hours h'."""
+def milestone_name(step: int) -> str:
+    """'100k steps', '1M steps'."""
+    return f"{step // 1_000_000}M steps" if step % 1_000_000 == 0 else f"{step // 1000:,}k steps"
+
+
+def table_rows(board: list[Score], budgets: dict[str, int] | None = None) -> list[dict[str, str]]:
+    """One row per entry, a column per milestone: 'IQM (low to high), n seeds; hours CPU-h', or 'beyond its budget'
+    (``budgets``: each label's steps) or 'not reached'."""
     rows: dict[str, dict[str, str]] = {}
     for s in board:
         row = rows.setdefault(s.label, {"algorithm and settings": s.label})
         hours = "" if s.cpu_hours is None else f"; {s.cpu_hours:.1f} CPU-h"
-        row[f"{s.step // 1000:,}k steps"] = (f"{s.iqm:,.0f} ({s.low:,.0f} to {s.high:,.0f}), "
+        row[milestone_name(s.step)] = (f"{s.iqm:,.0f} ({s.low:,.0f} to {s.high:,.0f}), "
                                              f"{len(s.returns)} seed{'s' * (len(s.returns) != 1)}{hours}")
-    columns = [f"{m // 1000:,}k steps" for m in MILESTONES]
-    return [{"algorithm and settings": r["algorithm and settings"], **{c: r.get(c, "not reached") for c in columns}}
-            for r in rows.values()]
+    columns = [milestone_name(m) for m in MILESTONES]
+    budgets = budgets or {}
+
+    def missing(label: str, step: int) -> str:
+        return "beyond its budget" if step > budgets.get(label, step) else "not reached"
+
+    return [{"algorithm and settings": label, **{c: r.get(c, missing(label, m)) for c, m in zip(columns, MILESTONES)}}
+            for label, r in rows.items()]

@@ -36,4 +36,5 @@ def test_no_milestone_beyond_the_budget():
     runs = {"ddpg-report-humanoid": load_experiment("ddpg-report-humanoid")}
     board = scores(None, entries=(("small", "ddpg-report-humanoid", "small"),), runs=runs)
     assert max(s.step for s in board) <= 500_000
+    assert table_rows(board, {"small": 500_000})[0]["1M steps"] == "beyond its budget"
     assert seed_returns(runs["ddpg-report-humanoid"]["small"], 300_000)  # its seeds' logs reach 300k
