@@ -38,6 +38,7 @@ The package, one idea a module. It imports :mod:`rlcore`; :mod:`rlcore` never im
 - :mod:`rlbook.peers`: the records of the returns benchmark against Stable-Baselines3;
 - :mod:`rlbook.course_report`: the course report's tables, as printed;
 - :mod:`rlbook.record_plots`: plots of the book's records (DPPO's scaling, a critic trace);
+- :mod:`rlbook.scoreboard`: every Humanoid-v5 setting's return at 100k, 300k and 1M steps beside the CPU-hours;
 - chapter helpers: :mod:`rlbook.tabular_seeds` (tabular seeds in a reused process pool),
   :mod:`rlbook.tabular_plots`, :mod:`rlbook.mujoco_analysis`, :mod:`rlbook.overestimation`,
   :mod:`rlbook.crossq_demo` (a batch like a replay memory's, for chapter 9's batch-norm demonstration);
