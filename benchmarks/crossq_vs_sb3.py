@@ -23,7 +23,9 @@ the budget is spent learning; the critics' width is ``--critic-width`` (sb3-cont
 body with the same settings and seed, and each final deterministic policy (the squashed Gaussian's mean, the batch
 renorm layers on their running statistics) plays ``--episodes`` fresh episodes, the same reset seeds for both
 (``1_000_000 + 1000 * seed + i``, none a training episode's). A check of the implementation, not a ranking: the two
-draw different random numbers from the same seed, so a seed's two runs are not the same run.
+draw different random numbers from the same seed, so a seed's two runs are not the same run. At a budget short of
+``--bn-warmup`` (100,000 batches) the layers never leave the warm-up: the check covers batch norm, not renorm's
+corrections (a smaller ``--bn-warmup`` reaches them, on both sides alike).
 
 What is the same in both (the settings of :func:`settings`, and sb3-contrib 2.9.2's code read for the rest):
 
@@ -55,12 +57,15 @@ What differs (none of it changes what an update computes by more than rounding, 
   H_target) (the same fixed point; a gradient alpha times smaller in log alpha, which Adam's normalization mostly
   removes); sb3-contrib updates the temperature before the actor, rlcore after (both losses use the same alpha);
 - batch renormalization in a training pass: sb3-contrib normalizes with the batch's *unbiased* variance (``x.var``,
-  divisor m - 1), rlcore with the biased one (divisor m, as ``torch.nn.BatchNorm1d``): a scale of sqrt(1 - 1/m),
-  0.999 in the critics' joint batch of 512; after the warm-up sb3-contrib folds r and d into a mean and variance,
-  (x - (mu_B - d sigma_B / r)) / sqrt(sigma_B^2 / r^2 + eps), where rlcore computes (x - mu_B) / sigma_B * r + d with
-  eps inside sigma_B: the same up to where eps enters; sb3-contrib renormalizes once it has seen more than
-  ``warmup`` batches, rlcore once it has seen ``warmup`` (one batch apart); neither relaxes r_max and d_max over
-  time as Ioffe does (both: clipped at 3 and 5 from the end of the warm-up);
+  divisor m - 1), rlcore with the biased one (divisor m, as ``torch.nn.BatchNorm1d``): during the warm-up
+  sb3-contrib's normalized features are rlcore's times sqrt(1 - 1/m), 0.999 in the critics' joint batch of 512 and
+  0.998 in the actor's 256 (checked: 0.99902 against sqrt(511/512) = 0.99902 on one batch). After the warm-up
+  sb3-contrib folds r and d into a mean and variance, (x - (mu_B - d s_B / r)) / sqrt(s_B^2 / r^2 + eps), where
+  rlcore computes (x - mu_B) / sigma_B * r + d with eps inside sigma_B: with r and d unclipped both come to
+  (x - mu) / sigma on the running statistics, apart from where eps enters (0.9996 on the same batch). sb3-contrib
+  renormalizes once it has seen more than ``warmup`` batches, rlcore once it has seen ``warmup`` (one batch apart);
+  neither relaxes r_max and d_max over time as Ioffe does (both: clipped at 3 and 5 from the end of the warm-up);
+  the running statistics are the same (both follow the unbiased variance);
 - the squashing's log-determinant: sb3-contrib's log(1 - tanh(u)^2 + 1e-6), rlcore's exact
   2 (log 2 - u - softplus(-2u)) (they part where |u| > ~7, i.e. a saturated action);
 - sb3-contrib's actor has ``log_std_init = -3``, but it is only used with gSDE (``use_sde``, off here): without it
