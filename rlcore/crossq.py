@@ -42,7 +42,7 @@ from rlcore.offpolicy import POLICY_KEYS, policy_evaluation, saved_actor  # noqa
 from rlcore.offpolicy import (ActionBox, DeterministicPolicy, Minibatch, Observations, OffPolicyConfig,
                               OffPolicyLoop, TwinCritic, UpdateHook, frozen, gradient_step, make_envs, make_replay,
                               min_q)
-from rlcore.sac import MeanAction, SquashedGaussianActor, critic_loss, temperature_loss
+from rlcore.sac import MeanAction, Result, SquashedGaussianActor, TemperatureLog, temperature_loss
 
 
 @dataclass
@@ -177,21 +177,6 @@ def crossq_target(q_next: torch.Tensor, next_logp: torch.Tensor, rewards: torch.
 # [/crossq-target]
 
 
-@dataclass
-class Result:
-    actor: NormalizedActor
-    critic: NormalizedTwinCritic
-    episode_returns: np.ndarray
-    episode_end_steps: np.ndarray
-    eval_steps: np.ndarray
-    eval_returns: np.ndarray
-    steps: int
-    policy: DeterministicPolicy
-    alpha_steps: np.ndarray
-    alphas: np.ndarray
-    entropies: np.ndarray
-
-
 def make_networks(sp: dict[str, Any], config: Config) -> tuple[NormalizedActor, NormalizedTwinCritic]:
     renorm = config.renorm()
     actor = NormalizedActor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"], renorm)
@@ -234,7 +219,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 300_000, seed:
     run.records(spaces=sp)
     loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
-    alpha_log: list[tuple[int, float, float]] = []
+    temperatures = TemperatureLog(run, config.eval_every)
 
     def act(obs: np.ndarray) -> np.ndarray:
         """a ~ pi(.|s), the actor's layers normalizing by their running statistics."""
@@ -270,15 +255,11 @@ def train(env_id: str, config: Config | None = None, steps: int = 300_000, seed:
                 gradient_step(alpha_opt, temperature_loss(log_alpha, logp.detach(), target_entropy))
             entropy[0] = -float(logp.detach().mean())
         # [/crossq-learn]
-        if config.eval_every and step % config.eval_every == 0:
-            row = (step, temperature_now(), entropy[0])
-            alpha_log.append(row)
-            run.log("alpha", step=row[0], alpha=row[1], entropy=row[2])
+        temperatures.maybe_log(step, temperature_now(), entropy[0])
 
     step = loop.run_until(steps, act, learn, critic, targets)
-    a = np.array(alpha_log, dtype=float).reshape(-1, 3)
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns, step,
-                  saved_policy(actor, observations), a[:, 0].astype(int), a[:, 1], a[:, 2])
+                  saved_policy(actor, observations), *temperatures.arrays())
 
 
 def make_config(algo: str, **overrides: Any) -> Config:

@@ -183,6 +183,25 @@ class Result:
     """The policy's entropy estimate -log pi on the minibatch, beside each logged alpha."""
 
 
+class TemperatureLog:
+    """The temperature and the policy's entropy estimate every ``every`` steps: ``alpha.csv`` in the run folder, and
+    the arrays a :class:`Result` holds."""
+
+    def __init__(self, run: Run, every: int):
+        self.run, self.every = run, every
+        self.rows: list[tuple[int, float, float]] = []
+
+    def maybe_log(self, step: int, alpha: float, entropy: float) -> None:
+        if self.every and step % self.every == 0:
+            self.rows.append((step, alpha, entropy))
+            self.run.log("alpha", step=step, alpha=alpha, entropy=entropy)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(steps, alphas, entropies)."""
+        a = np.array(self.rows, dtype=float).reshape(-1, 3)
+        return a[:, 0].astype(int), a[:, 1], a[:, 2]
+
+
 def make_networks(sp: dict[str, Any], config: Config) -> tuple[SquashedGaussianActor, TwinCritic, TwinCritic]:
     actor = SquashedGaussianActor(sp["obs_dim"], sp["act_dim"], config.hidden, sp["low"], sp["high"])
     critic = TwinCritic(sp["obs_dim"], sp["act_dim"], config.hidden)
@@ -223,7 +242,7 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
     run.records(spaces=sp)
     loop = OffPolicyLoop(run, env, buffer, observations, config, seed, rng, box, on_update)
     loop.resume()
-    alpha_log: list[tuple[int, float, float]] = []
+    temperatures = TemperatureLog(run, config.eval_every)
 
     def act(obs: np.ndarray) -> np.ndarray:
         """a ~ pi(.|s): the policy's own noise explores."""
@@ -249,15 +268,11 @@ def train(env_id: str, config: Config | None = None, steps: int = 1_000_000, see
         soft_update(critic_t, critic, config.tau)
         # [/sac-learn]
         entropy[0] = -float(logp.mean())
-        if config.eval_every and step % config.eval_every == 0:
-            row = (step, temperature_now(), entropy[0])
-            alpha_log.append(row)
-            run.log("alpha", step=row[0], alpha=row[1], entropy=row[2])
+        temperatures.maybe_log(step, temperature_now(), entropy[0])
 
     step = loop.run_until(steps, act, learn, critic, targets)
-    a = np.array(alpha_log, dtype=float).reshape(-1, 3)
     return Result(actor, critic, run.episode_returns, run.episode_end_steps, run.eval_steps, run.eval_returns, step,
-                  saved_policy(actor, observations), a[:, 0].astype(int), a[:, 1], a[:, 2])
+                  saved_policy(actor, observations), *temperatures.arrays())
 
 
 def make_config(algo: str, **overrides: Any) -> Config:

@@ -93,7 +93,7 @@ def test_a_stored_trace_loads_as_arrays(tmp_path):
 
 @pytest.mark.parametrize("argv, message", [
     (["ddpg-modern-1m/no-such-run", "--seeds", "0", "--steps", "10"], "has no run"),
-    (["ppo-mujoco-1m/hopper", "--seeds", "0", "--steps", "10"], "watches ddpg, td3 and sac"),
+    (["ppo-mujoco-1m/hopper", "--seeds", "0", "--steps", "10"], "watches ddpg, td3, sac and crossq"),
     (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "2000000"], "between 1 and"),
     (["ddpg-modern-1m", "--seeds", "0", "--steps", "10"], "EXPERIMENT/RUN"),
     (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "9999"], "before learning starts (step 10,000)"),
