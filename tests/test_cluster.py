@@ -69,13 +69,21 @@ def driver(argv: list[str], blocked: str = "") -> list[str]:
 
 @pytest.fixture(scope="module", autouse=True)
 def pinned_environment():
-    """:data:`PINNED` set and :data:`UNSET` unset for this module's tests, the reader's values back afterwards."""
+    """:data:`PINNED` set and :data:`UNSET` unset for this module's tests, the reader's values back afterwards. The
+    commit this process records is asked again under them (and after them): an earlier test in the same process may
+    have cached the checkout's own (:func:`rlcore.provenance.loaded_commit`)."""
+    from rlcore import provenance
+
     with pytest.MonkeyPatch.context() as mp:
         for name, value in PINNED.items():
             mp.setenv(name, value)
         for name in UNSET:
             mp.delenv(name, raising=False)
+        provenance.loaded_commit.cache_clear()
+        provenance.loaded_changes.cache_clear()
         yield
+    provenance.loaded_commit.cache_clear()
+    provenance.loaded_changes.cache_clear()
 
 
 @pytest.fixture(scope="module")
@@ -252,9 +260,10 @@ def test_a_killed_worker_is_retried_and_resumes_from_its_checkpoint(cluster, ref
                                      take=ray_snapshots("auto"))
     assert line.startswith(f"{TINY.name}/long/seed-0: snapshot at step ") and line.endswith(")"), line
     assert json.loads((result_dir / ex.SNAPSHOT).read_text())["steps"] == 4_000
-    key, deadline = f"{TINY.name}/long/seed-0", time.monotonic() + 60
+    key, deadline = f"{TINY.name}/long/seed-0", time.monotonic() + 300
     while key not in (seeds := board_state(ray)) and time.monotonic() < deadline:
-        time.sleep(0.05)  # the cluster's list of named actors can lag behind a moment
+        time.sleep(0.05)  # the cluster's list of named actors can lag behind (a bound, as wait_for's)
+    assert key in seeds, f"{key} did not reach the run's board within 300 s; boards: {sorted(seeds)}"
     os.kill(seeds[key]["attempts"][-1]["pid"], signal.SIGKILL)
     thread.join(timeout=300)
     assert not thread.is_alive()

@@ -422,9 +422,14 @@ def test_an_interrupt_stops_the_torchrun_job_and_waits_for_it(tmp_path):
 
     import threading
 
+    # Python's own Ctrl-C handler, whatever an earlier test in this process left installed (Ray's driver sets its own)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     threading.Thread(target=interrupt_once_started, daemon=True).start()
-    with pytest.raises(KeyboardInterrupt):
-        run_torchrun([sys.executable, "-c", code], dict(os.environ))
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_torchrun([sys.executable, "-c", code], dict(os.environ))
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert stopped.exists()  # the job got the SIGINT and had ended when the interrupt came out
     with pytest.raises(subprocess.CalledProcessError):
         run_torchrun([sys.executable, "-c", "raise SystemExit(5)"], dict(os.environ))
