@@ -1,12 +1,10 @@
 """The experiment runner on a Ray cluster (rlbook.cluster), on a local cluster of two CPUs: the results are the local
 runner's bit for bit; a killed worker's seed is retried and resumes from its checkpoint; Ctrl-C on the submitting
-side cancels the tasks and leaves the seeds resumable; snapshots through Ray; the checkout shipped to the tasks
-(its heavy folders left out), a task running other code refused; the seeds in flight in `experiments status`; without Ray, one line that says what to
+side cancels the tasks and leaves the seeds resumable; snapshots through Ray; without Ray, one line that says what to
 install, and the local pool as before."""
 
 import json
 import os
-import re
 import signal
 import socket
 import subprocess
@@ -20,9 +18,9 @@ import torch
 
 import rlbook as ex
 from portable import skip_or_fail
-from rlbook.cluster import (BOARD_PREFIX, INSTALL, NAMESPACE, NOT_SHIPPED, PROCESS_BYTES, RAY_VERSION, Board,
-                            OtherCode, SeedsFailed, check_code, driver_code, in_flight_lines, last_value, on_node,
-                            ray_backend, ray_snapshots, replay_bytes, shipped_env, source_results, task_memory)
+from rlbook.cluster import (BOARD_PREFIX, INSTALL, NAMESPACE, PROCESS_BYTES, RAY_VERSION, Board, SeedsFailed,
+                            last_value, on_node, ray_backend, ray_snapshots, replay_bytes, source_results,
+                            task_memory)
 from rlbook.runner import train_one
 
 TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
@@ -88,17 +86,15 @@ def pinned_environment():
 
 @pytest.fixture(scope="module")
 def cluster(pinned_environment):
-    """A Ray cluster of this machine with two CPUs, and this process its driver, whose job ships the checkout as
-    :func:`rlbook.cluster.connect` does; yields its address. Its workers get :data:`PINNED` (they inherit this
-    process's environment, and the driver's job says so again)."""
+    """A Ray cluster of this machine with two CPUs, and this process its driver; yields its address. Its workers
+    get :data:`PINNED` (they inherit this process's environment, and the driver's job says so again)."""
     try:
         import ray
     except ImportError:
         skip_or_fail(f"the Ray backend's tests need Ray: {INSTALL}")
     register()
-    shipped = shipped_env(driver_code())  # as the backend's own connection ships the checkout
     info = ray.init(address="local", num_cpus=2, include_dashboard=False, namespace=NAMESPACE,
-                    runtime_env={**shipped, "env_vars": {**shipped["env_vars"], **PINNED}})
+                    runtime_env={"env_vars": PINNED})
     yield info.address_info["gcs_address"]
     ray.shutdown()
 
@@ -368,105 +364,3 @@ def test_a_continued_run_starts_on_a_node_from_the_submitting_machines_results(t
 def test_the_pinned_ray_is_the_one_requirements_install():
     pins = [line.split("#")[0].strip() for line in (HERE.parent / "requirements.txt").read_text().splitlines()]
     assert f"ray=={RAY_VERSION}" in pins
-
-
-def test_the_checkout_is_shipped_without_its_heavy_folders(cluster, tmp_path, monkeypatch):
-    import zipfile
-
-    from ray._private.ray_constants import get_runtime_env_default_excludes
-    from ray._private.runtime_env.packaging import create_package, get_uri_for_directory
-    from ray.remote_function import RemoteFunction
-
-    env = shipped_env(driver_code())
-    assert env["working_dir"] == str(HERE.parent) and env["env_vars"] == {"RLCORE_COMMIT": "test-cluster"}
-    create_package(env["working_dir"], tmp_path / "shipped.zip", include_gitignore=True, excludes=env["excludes"])
-    names = zipfile.ZipFile(tmp_path / "shipped.zip").namelist()
-    assert "rlcore/__init__.py" in names and "rlbook/cluster.py" in names and "tests/test_cluster.py" in names
-    assert (HERE.parent / "results").is_dir()  # there, and left out
-    assert not [n for n in names if n.split("/")[0] in ("runs", "results", "_build", ".venv", ".git")
-                or n.startswith("tests/_nbval/")]
-    assert set(NOT_SHIPPED) == {"runs", "results", "_build", ".venv", ".git", "tests/_nbval"}
-    # what the backend passes to its tasks: that package, uploaded, and the submitting machine's commit
-    passed, options = [], RemoteFunction.options
-    monkeypatch.setattr(RemoteFunction, "options", lambda self, **kw: passed.append(kw) or options(self, **kw))
-    results = tmp_path / "results"
-    (line,) = ex.run_experiment(TINY.name, only=["ql"], seeds=[0], results=results, work=tmp_path / "runs",
-                                train=ray_backend("auto"), progress=False)
-    assert line == f"{TINY.name}/ql/seed-0: done -> {results / TINY.name / 'ql' / 'seed-0'}"
-    ((task,),) = [[kw["runtime_env"]] for kw in passed]
-    uri = get_uri_for_directory(env["working_dir"], include_gitignore=True,
-                                excludes=get_runtime_env_default_excludes() + env["excludes"])
-    assert task == {"working_dir": uri, "env_vars": {"RLCORE_COMMIT": "test-cluster"}}
-    assert json.loads((results / TINY.name / "ql" / "seed-0" / "meta.json").read_text())["commit"] == "test-cluster"
-
-
-def test_a_task_running_other_code_is_refused_in_one_line(cluster, tmp_path, monkeypatch):
-    import rlbook.cluster
-
-    here = driver_code()
-    check_code(here)  # this process runs the checkout's code: nothing to say
-    with pytest.raises(OtherCode, match=rf"^refused on node \S+: its checkout {re.escape(str(HERE.parent))} is at commit [0-9a-f]{{40}}, "
-                                        rf"the submitting machine's at {'f' * 40}$"):
-        check_code({**here, "commit": "f" * 40})
-    # through the cluster: a submitting machine whose sources hash otherwise than the copy shipped to the node
-    monkeypatch.setattr(rlbook.cluster, "driver_code", lambda: {**here, "sources": "0" * 64})
-    results, work = tmp_path / "results", tmp_path / "runs"
-    with pytest.raises(SeedsFailed) as failed:
-        ex.run_experiment(TINY.name, only=["ql"], seeds=[0], results=results, work=work, train=ray_backend("auto"),
-                          progress=False)
-    ((key, error),) = failed.value.failures
-    assert key == f"{TINY.name}/ql/seed-0" and isinstance(error, OtherCode)
-    assert re.fullmatch(r"refused on node \S+: its rlcore/rlbook in (\S+) are not the submitting machine's "
-                        r"\(commit test-cluster; sources [0-9a-f]{12}, there 000000000000\)", str(error)), str(error)
-    shipped = Path(re.search(r" in (\S+) are not", str(error)).group(1))
-    assert shipped != HERE.parent and not (shipped / "results").exists()  # the node's copy, not the checkout
-    assert failed.value.lines == [f"{key}: failed: {error}"]
-    assert not work.exists() and not results.exists()  # refused before it trained
-
-
-def test_status_lists_the_seeds_in_flight_with_node_and_step(cluster, tmp_path, capsys):
-    import ray
-
-    from rlbook.__main__ import main
-
-    with pytest.raises(ValueError, match=r"^experiments status --ray local: .* give the address of the cluster"):
-        in_flight_lines(TINY.name, "local")
-    results, work = tmp_path / "results", tmp_path / "runs"
-    out: dict = {}
-    thread = threading.Thread(target=lambda: out.update(lines=ex.run_experiment(
-        TINY.name, only=["long"], results=results, work=work, train=ray_backend("auto"), progress=False)))
-    thread.start()
-    key, deadline = f"{TINY.name}/long/seed-0", time.monotonic() + 300
-    while (board_state(ray).get(key) or {}).get("checkpoint") is None and time.monotonic() < deadline:
-        time.sleep(0.05)  # until the seed has reported a checkpoint
-    seed = board_state(ray)[key]
-    (line,) = in_flight_lines(TINY.name, cluster)
-    node = ray.get_runtime_context().get_node_id()  # the cluster's one node
-    match = re.fullmatch(rf"{key}: in flight on {re.escape(socket.gethostname())} \(node {node[:8]}, pid "
-                         rf"{seed['attempts'][-1]['pid']}\), step ([\d,]+), last checkpoint at step ([\d,]+)", line)
-    assert match, line
-    step, saved = (int(g.replace(",", "")) for g in match.groups())
-    assert 0 < step <= 4_000 and 0 < saved <= 4_000 and saved % 250 == 0
-    code = Path(seed["attempts"][-1]["code"])  # the task imports the copy shipped to the node
-    assert code != HERE.parent and (code / "rlcore" / "__init__.py").exists() and not (code / "results").exists()
-    register()
-    assert main(["experiments", "status", TINY.name, "--ray", cluster, "--results", str(results), "--runs-dir",
-                 str(work)]) == 0
-    printed = capsys.readouterr().out.splitlines()
-    assert printed[0].startswith(f"{TINY.name}/") and any(p.startswith(f"{key}: in flight on ") for p in printed)
-    thread.join(timeout=300)
-    assert not thread.is_alive() and out["lines"][0].startswith(f"{key}: done -> ")
-    assert in_flight_lines(TINY.name, cluster) == [f"{TINY.name}: no seed in flight on the Ray cluster at {cluster}"]
-
-
-def test_the_board_keeps_a_seeds_last_checkpoint_and_its_end():
-    board = Board()
-    board.attempt("e/r/seed-0", "a" * 20, 11, 500, "host-a", "/tmp/code")
-    assert board.state()["e/r/seed-0"]["checkpoint"] == 500 and board.state()["e/r/seed-0"]["running"]
-    board.report("e/r/seed-0", 800.0, None, 750)
-    board.report("e/r/seed-0", 900.0, None)  # no checkpoint read this time: the last one stays
-    assert board.state()["e/r/seed-0"]["checkpoint"] == 750
-    assert board.state()["e/r/seed-0"]["attempts"] == [{"node": "a" * 20, "pid": 11, "host": "host-a",
-                                                         "code": "/tmp/code"}]
-    board.end("e/r/seed-0")
-    assert not board.state()["e/r/seed-0"]["running"]
