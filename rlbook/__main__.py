@@ -44,47 +44,21 @@ def cmd_experiments(args: argparse.Namespace) -> int:
                     print(f"Wrote {path}")
         return 0
     if args.action == "snapshot":
-        take = None
-        if args.ray:  # each seed's snapshot on the node where it trains
-            from rlbook.cluster import ray_snapshots
-
-            take = ray_snapshots(args.ray)
         for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
-                                           work=work, policy=args.policy, take=take):
+                                           work=work, policy=args.policy, ray=args.ray):
             print(line)
         return 0
     if args.action == "run":
-        return run_and_report(args, results, work)
+        try:
+            lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
+                                      results=results, work=work, ray=args.ray)
+        except KeyboardInterrupt:
+            print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
+                  "when you run the same command again.", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        print("\n".join(lines))
     print("\n".join(ex.status_lines(args.name, results, work)))
     return 0
-
-
-def run_and_report(args: argparse.Namespace, results: Path | None, work: Path | None) -> int:
-    """``experiments run``: train the missing seeds, print their status lines and the experiment's status. Seeds
-    that failed on a cluster, while the others went on, are listed last, and the exit status is 1."""
-    import rlbook as ex
-
-    train, failed = ex.train_all, ()  # the backend; what it raises when seeds failed while the others went on
-    if args.ray:
-        from rlbook.cluster import SeedsFailed, ray_backend
-
-        train, failed = ray_backend(args.ray), (SeedsFailed,)
-    failures = []
-    try:
-        lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
-                                  results=results, work=work, train=train)
-    except KeyboardInterrupt:
-        print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
-              "when you run the same command again.", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except failed as exc:
-        lines, failures = exc.lines, exc.failures
-    print("\n".join(lines))
-    print("\n".join(ex.status_lines(args.name, results, work)))
-    if failures:
-        print(f"error: {len(failures)} seed(s) failed: " + ", ".join(key for key, _ in failures) +
-              "; the others went on (their lines above say why)", file=sys.stderr)
-    return 1 if failures else 0
 
 
 def build_parser() -> argparse.ArgumentParser:
