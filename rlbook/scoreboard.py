@@ -69,7 +69,9 @@ def scores(cost: dict[str, Any] | None, entries=ENTRIES, milestones=MILESTONES,
     rates = seconds_per_step(cost)
     out = []
     for label, exp, name in entries:
-        run = runs.setdefault(exp, load_experiment(exp))[name]
+        if exp not in runs:  # each experiment read once, whatever number of entries it has
+            runs[exp] = load_experiment(exp)
+        run = runs[exp][name]
         setting = f"{exp}/{name}"
         for step in milestones:
             values = seed_returns(run, step) if step <= run.spec.steps else []

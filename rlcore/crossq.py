@@ -96,7 +96,7 @@ class Config(OffPolicyConfig):
             raise ValueError(f"crossq.Config.target_entropy must be a finite number or null, got "
                              f"{self.target_entropy!r}")
 
-    def renorm(self) -> dict[str, Any]:
+    def renorm(self) -> dict[str, Any] | None:
         """The batch renorm layers' settings, or None without batch norm."""
         return dict(momentum=self.bn_momentum, eps=self.bn_eps, warmup=self.bn_warmup, r_max=self.r_max,
                     d_max=self.d_max) if self.batch_norm else None
