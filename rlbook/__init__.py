@@ -103,6 +103,7 @@ from rlbook.analysis import (  # noqa: F401
     mean_std,
     seeds_table,
     gap_and_spread,
+    gap_rows,
     scaling_runs,
     learning_seconds,
     scaling_rows,

@@ -106,6 +106,24 @@ def gap_and_spread(finals: dict[str, np.ndarray]) -> tuple[str, str, float, floa
     return best, worst, means[best] - means[worst], max(float(np.std(f)) for f in finals.values())
 
 
+def gap_rows(measures: Mapping[str, Mapping[str, Any]], labels: Mapping[str, str] | None = None) -> list[dict[str, str]]:
+    """One table row per measure of the same arms (``{measure: {arm: per-seed scores}}``): the arms with the best and
+    the worst mean (by ``labels``, default their names), the gap between those means, the largest standard deviation
+    between the seeds of one arm, and whether the gap is more than twice that spread (:func:`gap_and_spread`): a
+    results page's "which arms do these seeds separate?", as a table rather than a paragraph of numbers."""
+    labels = labels or {}
+    rows = []
+    for measure, scores in measures.items():
+        scores = {arm: np.asarray(v, dtype=float) for arm, v in scores.items()}
+        best, worst, gap, spread = gap_and_spread(scores)
+        rows.append({"measure": measure,
+                     "best (mean)": f"{labels.get(best, best)} ({scores[best].mean():,.0f})",
+                     "worst (mean)": f"{labels.get(worst, worst)} ({scores[worst].mean():,.0f})",
+                     "gap between their means": f"{gap:,.0f}", "largest std within one arm": f"{spread:,.0f}",
+                     "gap above twice that std": "yes" if gap > 2 * spread else "no"})
+    return rows
+
+
 def eval_curves(run: RunResults, key: str = "mean_return") -> list[tuple[np.ndarray, np.ndarray]]:
     """Per seed, ``(evaluation steps, evals[key])``: what :func:`rlcore.plots.plot_learning_curves` draws."""
     return [(s.evals["step"], s.evals[key]) for s in run.seeds]

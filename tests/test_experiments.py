@@ -364,6 +364,16 @@ def test_gap_and_spread_names_the_best_and_worst_arm_and_the_widest_spread():
     assert (best, worst, gap, spread) == ("b", "a", 8.0, 2.0)
 
 
+def test_gap_rows_give_one_row_per_measure_with_its_best_and_worst_arm():
+    rows = ex.gap_rows({"final": {"a": [1.0, 3.0], "b": [10.0, 10.0], "c": [4.0, 8.0]},
+                        "metric": {"a": [4.0, 4.0], "b": [4.0, 6.0], "c": [6.0, 6.0]}}, labels={"b": "arm B"})
+    assert rows == [
+        {"measure": "final", "best (mean)": "arm B (10)", "worst (mean)": "a (2)", "gap between their means": "8",
+         "largest std within one arm": "2", "gap above twice that std": "yes"},
+        {"measure": "metric", "best (mean)": "c (6)", "worst (mean)": "a (4)", "gap between their means": "2",
+         "largest std within one arm": "1", "gap above twice that std": "no"}]
+
+
 def test_a_live_stand_in_leaves_no_temporary_folder_behind(tiny, tmp_path, monkeypatch):
     import gc
     import tempfile
