@@ -106,7 +106,8 @@ def gap_and_spread(finals: dict[str, np.ndarray]) -> tuple[str, str, float, floa
     return best, worst, means[best] - means[worst], max(float(np.std(f)) for f in finals.values())
 
 
-def gap_rows(measures: Mapping[str, Mapping[str, Any]], labels: Mapping[str, str] | None = None) -> list[dict[str, str]]:
+def gap_rows(measures: Mapping[str, Mapping[str, Any]],
+             labels: Mapping[str, str] | None = None) -> list[dict[str, str]]:
     """One table row per measure of the same arms (``{measure: {arm: per-seed scores}}``): the arms with the best and
     the worst mean (by ``labels``, default their names), the gap between those means, the largest standard deviation
     between the seeds of one arm, and whether the gap is more than twice that spread (:func:`gap_and_spread`): a
