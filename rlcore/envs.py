@@ -50,6 +50,13 @@ def is_mujoco(env_id: str) -> bool:
     return "mujoco" in str(gym.spec(env_id).entry_point)
 
 
+SHADOW_SIZE = 1024
+"""The side of the shadow map, in texels, of a MuJoCo task rendered offscreen (MuJoCo's default is 4096). The book
+renders 320 x 240 frames with a software OpenGL (Mesa) on the CPU, where drawing the 4096 x 4096 shadow map is most
+of a frame's cost: at 1024 a Humanoid-v5 frame costs about 40 % less CPU time and the shadows look the same at
+that size (``benchmarks/render_cost.py``, ``results/benchmarks/render-cost.json``)."""
+
+
 def make_env(
     env_id: str,
     seed: int | None = None,
@@ -61,7 +68,8 @@ def make_env(
 
     The id is checked first (a typo gets suggestions, not a registry traceback). Rendering to
     ``rgb_array`` picks a headless OpenGL backend for a MuJoCo task (other tasks draw without OpenGL).
-    ``RecordEpisodeStatistics`` puts the episode's return and length into ``info["episode"]`` when it ends. The
+    Its shadows are drawn from a smaller map than MuJoCo's own (:data:`SHADOW_SIZE`). ``RecordEpisodeStatistics``
+    puts the episode's return and length into ``info["episode"]`` when it ends. The
     action and observation spaces are seeded with ``seed``; seed the first ``reset`` with the same number:
     ``obs, info = env.reset(seed=seed)``.
     """
@@ -71,6 +79,8 @@ def make_env(
 
         select_gl_backend()
     env = gym.make(env_id, render_mode=render_mode, **gym_kwargs)
+    if render_mode == "rgb_array" and is_mujoco(env_id):
+        env.unwrapped.model.vis.quality.shadowsize = SHADOW_SIZE  # read when the first render makes the GL context
     if record_stats:
         env = gym.wrappers.RecordEpisodeStatistics(env)
     if seed is not None:

@@ -207,3 +207,25 @@ def test_mujoco_renders_offscreen_to_a_gif(tmp_path):
     assert decoded.std() > 0  # not a blank image
     with pytest.raises(ValueError):
         rollout_frames("Hopper-v5", max_frames=2, frame_skip=0)
+
+
+def test_offscreen_mujoco_draws_its_shadows_from_the_smaller_map_and_looks_the_same():
+    try:
+        select_gl_backend()
+    except HeadlessGLError as err:
+        skip_or_fail(f"MuJoCo cannot render here ({render.no_gl_reason(err)})")
+    from rlcore.envs import SHADOW_SIZE, make_env
+
+    frames = {}
+    for name, size, shadows in (("book", SHADOW_SIZE, True), ("mujoco", 4096, True), ("none", SHADOW_SIZE, False)):
+        env = make_env("Hopper-v5", seed=0, render_mode="rgb_array", width=160, height=120)
+        assert env.unwrapped.model.vis.quality.shadowsize == SHADOW_SIZE < 4096  # the book's size, not MuJoCo's
+        env.unwrapped.model.vis.quality.shadowsize = size
+        if not shadows:
+            env.unwrapped.model.light_castshadow[:] = 0
+        env.reset(seed=0)
+        frames[name] = env.render().astype(float)
+        env.close()
+    assert frames["book"].std() > 0
+    assert np.abs(frames["book"] - frames["mujoco"]).mean() < 1.0   # the same picture as MuJoCo's own map draws
+    assert np.abs(frames["book"] - frames["none"]).mean() > 1.0     # and it has its shadows
