@@ -454,6 +454,23 @@ def _a2c_cartpole_pendulum() -> Experiment:
     )
 
 
+PENDULUM_SMALL: dict[str, Any] = {"hidden": (64, 64), "batch_size": 64, "buffer_size": 20_000, "learning_starts": 500,
+                                   "eval_every": 1_000, "eval_episodes": 3, "actor_lr": 1e-3, "critic_lr": 1e-3}
+"""8.2's small Pendulum settings, shared by SAC and TD3: RL Zoo's step sizes, 64 x 64 networks, 500 random steps."""
+
+
+def _sac_td3_pendulum() -> Experiment:
+    # 8.2: SAC (temperature step size 1e-3 too) beside TD3 on Pendulum-v1 with PENDULUM_SMALL, 8k steps, 3 seeds. A
+    # few minutes on one core; stored so that the book build does not train it again every time.
+    seeds = (0, 1, 2)
+    return Experiment(
+        "sac-td3-pendulum",
+        "SAC and TD3 on Pendulum-v1 with small networks and RL Zoo's step sizes, 8k steps, 3 seeds",
+        (RunSpec("sac", "sac", "Pendulum-v1", 8_000, seeds, {**PENDULUM_SMALL, "alpha_lr": 1e-3}, "SAC"),
+         RunSpec("td3", "td3", "Pendulum-v1", 8_000, seeds, dict(PENDULUM_SMALL), "TD3")),
+    )
+
+
 def _reinforce_a2c_cartpole() -> Experiment:
     # 4.2: REINFORCE beside A2C with A2C's default settings and the budget 4.1 gives A2C on CartPole, five seeds each,
     # the deterministic policy evaluated on 5 episodes every 4,000 steps. A minute or two on two cores; stored so that
@@ -525,6 +542,7 @@ EXPERIMENTS: dict[str, Callable[[], Experiment]] = {
     "crossq-ablation": _crossq_ablation,
     "reinforce-a2c-cartpole": _reinforce_a2c_cartpole,
     "a2c-cartpole-pendulum": _a2c_cartpole_pendulum,
+    "sac-td3-pendulum": _sac_td3_pendulum,
 }
 
 
