@@ -7,15 +7,28 @@ summarized against the best any policy can do.
     returns = evaluate_seeds(runs, "FrozenLake-v1", episodes=10)      # shape (seeds, episodes)
 
 The algorithm itself is :mod:`rlcore.tabular`; this module only runs it several times.
+
+A tabular run is exact arithmetic on small tables, the same on every processor, but chapter 1's pages train a few
+hundred of them. So each seed's run is stored once, under ``results/tabular-runs/`` (:func:`stored_run`), keyed by
+everything it depends on: the task, the Config, the budget, the seed, the source of the code that trains it and the
+versions of Gymnasium and NumPy. A page reads a stored run instead of training it again; a run whose key is not
+stored (new settings, or code changed since) is trained now, and stored where the build asks for it::
+
+    RLBOOK_STORE_TABULAR=1 jupyter-book build .     # or: RLBOOK_STORE_TABULAR=1 pytest --nbval chapters/01*.md
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
+import dataclasses
+import hashlib
+import json
 import multiprocessing as mp
+import os
 import signal
 from collections.abc import Callable, Iterable
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -65,10 +78,69 @@ class SeedPool:
 # [/seed-pool]
 
 
+STORE = "RLBOOK_STORE_TABULAR"
+"""Set to 1, :func:`stored_run` writes the runs it trains (``RLBOOK_STORE_TABULAR=1 jupyter-book build .``)."""
+CODE = ("rlcore/tabular.py", "rlcore/harness.py", "rlcore/envs.py")
+"""The sources a tabular run's result depends on (with Gymnasium's and NumPy's versions): a change to any of them
+makes every stored run stale, and a page trains it again."""
+
+
+def code_sha256() -> str:
+    """The sources of :data:`CODE`, hashed together."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for name in CODE:
+        digest.update((root / name).read_bytes())
+    return digest.hexdigest()
+
+
+def run_key(env_id: str, config: Config, steps: int, seed: int) -> tuple[str, dict[str, Any]]:
+    """The name a run is stored under, and what it stands for (task, Config, budget, seed, code, versions)."""
+    import gymnasium
+
+    params = {"env_id": env_id, "config": json.loads(json.dumps(dataclasses.asdict(config), default=str)),
+              "steps": steps, "seed": seed, "code_sha256": code_sha256(),
+              "versions": {"gymnasium": gymnasium.__version__, "numpy": np.__version__}}
+    return hashlib.sha256(json.dumps(params, sort_keys=True).encode()).hexdigest()[:24], params
+
+
+def stored_runs_dir() -> Path:
+    """``results/tabular-runs/`` of the book (:func:`rlbook.paths.results_dir`)."""
+    from rlbook.paths import results_dir
+
+    return results_dir() / "tabular-runs"
+
+
+def stored_run(env_id: str, config: Config, steps: int, seed: int, folder: Path | None = None) -> Result:
+    """:func:`rlcore.tabular.train`'s Result for this run: read from ``folder`` (default :func:`stored_runs_dir`)
+    where it is stored under its :func:`run_key`; otherwise trained now, and written there when ``RLBOOK_STORE_TABULAR``
+    is 1 (with the command, commit and machine that trained it)."""
+    key, params = run_key(env_id, config, steps, seed)
+    path = (stored_runs_dir() if folder is None else Path(folder)) / f"{key}.npz"
+    if path.exists():
+        with np.load(path) as data:
+            return Result(data["Q"], data["episode_returns"], data["episode_lengths"], data["episode_end_steps"],
+                          int(data["steps"]))
+    result = train(env_id, config, steps, seed)
+    if os.environ.get(STORE) == "1":
+        from rlcore.provenance import run_metadata
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial_path = path.with_name(f".{path.name}.{os.getpid()}.npz")
+        meta = json.dumps({"params": params, **run_metadata()}, default=str)
+        np.savez_compressed(partial_path, Q=result.Q, episode_returns=result.episode_returns,
+                            episode_lengths=result.episode_lengths, episode_end_steps=result.episode_end_steps,
+                            steps=result.steps, meta=np.array(meta))
+        os.replace(partial_path, path)
+    return result
+
+
 def train_seeds(env_id: str, config: Config, steps: int, seeds: Iterable[int],
-                pool: SeedPool | None = None) -> list[Result]:
-    """One :func:`rlcore.tabular.train` run per seed (in ``pool``'s workers, or here); the Results in seed order."""
-    return (pool or SeedPool(workers=1)).map(partial(train, env_id, config, steps), seeds)
+                pool: SeedPool | None = None, folder: Path | None = None) -> list[Result]:
+    """One :func:`rlcore.tabular.train` run per seed (in ``pool``'s workers, or here), each :func:`stored_run`: read
+    where ``folder`` (default ``results/tabular-runs/``) holds it; the Results in seed order."""
+    folder = stored_runs_dir() if folder is None else Path(folder)
+    return (pool or SeedPool(workers=1)).map(partial(stored_run, env_id, config, steps, folder=folder), seeds)
 
 
 def evaluate_seeds(results: list[Result], env_id: str, episodes: int, max_steps: int | None = None,

@@ -1,0 +1,50 @@
+"""rlbook.tabular_seeds' stored runs: a stored run is the run trained now, read back exactly; its key changes with
+anything the run depends on (settings, budget, seed, code); nothing is written unless RLBOOK_STORE_TABULAR=1."""
+import json
+
+import numpy as np
+import pytest
+
+from rlbook import tabular_seeds
+from rlbook.tabular_seeds import SeedPool, run_key, stored_run, train_seeds
+from rlcore.tabular import Config, train
+
+CONFIG = Config(env_kwargs={"is_slippery": False})
+
+
+def same(a, b):
+    return (np.array_equal(a.Q, b.Q) and np.array_equal(a.episode_returns, b.episode_returns)
+            and np.array_equal(a.episode_lengths, b.episode_lengths)
+            and np.array_equal(a.episode_end_steps, b.episode_end_steps) and a.steps == b.steps)
+
+
+def test_a_stored_run_is_read_back_as_the_run_trained_now(tmp_path, monkeypatch):
+    monkeypatch.setenv("RLBOOK_STORE_TABULAR", "1")
+    first = train_seeds("FrozenLake-v1", CONFIG, 600, [0, 1], SeedPool(workers=1), folder=tmp_path)
+    files = sorted(tmp_path.glob("*.npz"))
+    assert len(files) == 2                                   # one file per seed
+    monkeypatch.setattr(tabular_seeds, "train", lambda *a, **k: pytest.fail("trained again instead of read"))
+    again = train_seeds("FrozenLake-v1", CONFIG, 600, [0, 1], folder=tmp_path)
+    assert all(same(a, b) for a, b in zip(first, again))
+    assert same(again[1], train("FrozenLake-v1", CONFIG, 600, 1))
+    with np.load(files[0]) as data:                          # what it stands for and who trained it, inside
+        meta = json.loads(str(data["meta"]))
+    assert meta["params"]["env_id"] == "FrozenLake-v1" and meta["params"]["steps"] == 600 and "commit" in meta
+
+
+def test_the_key_changes_with_anything_the_run_depends_on(monkeypatch):
+    key = run_key("FrozenLake-v1", CONFIG, 600, 0)[0]
+    assert key == run_key("FrozenLake-v1", Config(env_kwargs={"is_slippery": False}), 600, 0)[0]
+    others = {run_key("FrozenLake-v1", Config(env_kwargs={"is_slippery": True}), 600, 0)[0],
+              run_key("FrozenLake-v1", Config(env_kwargs={"is_slippery": False}, alpha=0.2), 600, 0)[0],
+              run_key("FrozenLake-v1", CONFIG, 601, 0)[0], run_key("FrozenLake-v1", CONFIG, 600, 1)[0],
+              run_key("CliffWalking-v1", CONFIG, 600, 0)[0]}
+    assert key not in others and len(others) == 5
+    monkeypatch.setattr(tabular_seeds, "code_sha256", lambda: "other code")
+    assert run_key("FrozenLake-v1", CONFIG, 600, 0)[0] != key   # changed code: the stored run is stale
+
+
+def test_without_the_switch_nothing_is_written(tmp_path, monkeypatch):
+    monkeypatch.delenv("RLBOOK_STORE_TABULAR", raising=False)
+    result = stored_run("FrozenLake-v1", CONFIG, 300, 0, folder=tmp_path)
+    assert result.steps == 300 and list(tmp_path.iterdir()) == []
