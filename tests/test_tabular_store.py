@@ -1,5 +1,6 @@
 """rlbook.tabular_seeds' stored runs: a stored run is the run trained now, read back exactly; its key changes with
 anything the run depends on (settings, budget, seed, code); nothing is written unless RLBOOK_STORE_TABULAR=1."""
+import hashlib
 import json
 
 import numpy as np
@@ -48,3 +49,23 @@ def test_without_the_switch_nothing_is_written(tmp_path, monkeypatch):
     monkeypatch.delenv("RLBOOK_STORE_TABULAR", raising=False)
     result = stored_run("FrozenLake-v1", CONFIG, 300, 0, folder=tmp_path)
     assert result.steps == 300 and list(tmp_path.iterdir()) == []
+
+
+def test_the_stored_runs_are_the_current_codes():
+    """A change to the code that trains them makes every stored run stale (the pages then train them again, minutes
+    longer): store them again, and remove the stale ones. (Other versions of Gymnasium or NumPy on a reader's machine
+    only mean that the pages train them there.)"""
+    stored = sorted(tabular_seeds.stored_runs_dir().glob("*.npz"))
+    assert stored, "results/tabular-runs/ is empty"
+    current = tabular_seeds.code_sha256()
+    stale = []
+    for path in stored:
+        with np.load(path) as data:
+            params = json.loads(str(data["meta"]))["params"]
+        named = hashlib.sha256(json.dumps(params, sort_keys=True).encode()).hexdigest()[:24]
+        if params["code_sha256"] != current or named != path.stem:
+            stale.append(path.name)
+    assert not stale, (f"{len(stale)} of {len(stored)} stored tabular runs are stale (the code changed): delete "
+                       "results/tabular-runs/ and run RLBOOK_STORE_TABULAR=1 RLBOOK_PROFILE=book pytest --nbval "
+                       "chapters/01a_tabular_experiments.md chapters/01b_tabular_pitfalls.md, then the same with "
+                       "RLBOOK_PROFILE=quick")
