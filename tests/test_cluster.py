@@ -29,6 +29,11 @@ TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
                                                            "checkpoint_every": 250}),
 ))
 HERE = Path(__file__).parent
+PINNED = {"RLCORE_TORCH_THREADS": "1", "OMP_NUM_THREADS": "1"}
+"""The environment the tests assert on (one torch thread a seed, as ``meta.json`` records), whatever the reader's
+shell says: set here, in the workers of the cluster (started from this process) and in the drivers started below."""
+UNSET = ("RLCORE_COMMAND", "RLCORE_COMMIT")
+"""Unset for the tests: the command and commit the runs record are the ones of the test."""
 
 
 def register() -> None:
@@ -50,15 +55,36 @@ def driver(argv: list[str], blocked: str = "") -> list[str]:
     return [sys.executable, "-c", code]
 
 
+@pytest.fixture(scope="module", autouse=True)
+def pinned_environment():
+    """:data:`PINNED` set and :data:`UNSET` unset for this module's tests, the reader's values back afterwards. The
+    commit this process records is asked again under them (and after them): an earlier test in the same process may
+    have cached the checkout's own (:func:`rlcore.provenance.loaded_commit`)."""
+    from rlcore import provenance
+
+    with pytest.MonkeyPatch.context() as mp:
+        for name, value in PINNED.items():
+            mp.setenv(name, value)
+        for name in UNSET:
+            mp.delenv(name, raising=False)
+        provenance.loaded_commit.cache_clear()
+        provenance.loaded_changes.cache_clear()
+        yield
+    provenance.loaded_commit.cache_clear()
+    provenance.loaded_changes.cache_clear()
+
+
 @pytest.fixture(scope="module")
-def cluster():
-    """A Ray cluster of this machine with two CPUs, and this process its driver; yields its address."""
+def cluster(pinned_environment):
+    """A Ray cluster of this machine with two CPUs, and this process its driver; yields its address. Its workers
+    get :data:`PINNED` (they inherit this process's environment, and the driver's job says so again)."""
     try:
         import ray
     except ImportError:
         skip_or_fail(f"the Ray backend's tests need Ray: {INSTALL}")
     register()
-    info = ray.init(address="local", num_cpus=2, include_dashboard=False, namespace=NAMESPACE)
+    info = ray.init(address="local", num_cpus=2, include_dashboard=False, namespace=NAMESPACE,
+                    runtime_env={"env_vars": PINNED})
     yield info.address_info["gcs_address"]
     ray.shutdown()
 
@@ -165,9 +191,10 @@ def test_a_killed_worker_is_retried_and_resumes_from_its_checkpoint(cluster, ref
     (line,) = ex.snapshot_experiment(TINY.name, only=["long"], results=results, work=work, ray="auto")
     assert line.startswith(f"{TINY.name}/long/seed-0: snapshot at step ") and line.endswith(")"), line
     assert json.loads((result_dir / ex.SNAPSHOT).read_text())["steps"] == 4_000
-    key, deadline = f"{TINY.name}/long/seed-0", time.monotonic() + 60
+    key, deadline = f"{TINY.name}/long/seed-0", time.monotonic() + 300
     while key not in (seeds := board_state(ray)) and time.monotonic() < deadline:
-        time.sleep(0.05)  # the cluster's list of named actors can lag behind a moment
+        time.sleep(0.05)  # the cluster's list of named actors can lag behind (a bound, as wait_for's)
+    assert key in seeds, f"{key} did not reach the run's board within 300 s; boards: {sorted(seeds)}"
     os.kill(seeds[key]["attempts"][-1]["pid"], signal.SIGKILL)
     thread.join(timeout=300)
     assert not thread.is_alive()
