@@ -49,16 +49,37 @@ def cmd_experiments(args: argparse.Namespace) -> int:
             print(line)
         return 0
     if args.action == "run":
-        try:
-            lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
-                                      results=results, work=work, ray=args.ray)
-        except KeyboardInterrupt:
-            print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
-                  "when you run the same command again.", file=sys.stderr)
-            return EXIT_INTERRUPTED
-        print("\n".join(lines))
+        return run_and_report(args, results, work)
     print("\n".join(ex.status_lines(args.name, results, work)))
     return 0
+
+
+def run_and_report(args: argparse.Namespace, results: Path | None, work: Path | None) -> int:
+    """``experiments run``: train the missing seeds, print their status lines and the experiment's status. Seeds
+    that failed on a cluster, while the others went on, are listed last, and the exit status is 1."""
+    import rlbook as ex
+
+    failed: tuple = ()  # what a cluster raises when seeds failed while the others went on
+    if args.ray:
+        from rlbook.cluster import SeedsFailed
+
+        failed = (SeedsFailed,)
+    failures = []
+    try:
+        lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
+                                  results=results, work=work, ray=args.ray)
+    except KeyboardInterrupt:
+        print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
+              "when you run the same command again.", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except failed as exc:
+        lines, failures = exc.lines, exc.failures
+    print("\n".join(lines))
+    print("\n".join(ex.status_lines(args.name, results, work)))
+    if failures:
+        print(f"error: {len(failures)} seed(s) failed: " + ", ".join(key for key, _ in failures) +
+              "; the others went on (their lines above say why)", file=sys.stderr)
+    return 1 if failures else 0
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,8 +1,8 @@
 """The experiment runner on a Ray cluster: ``experiments run NAME --ray ADDRESS`` and ``experiments snapshot NAME
 --ray ADDRESS``. Ray is optional (``pip install ray==2.60.0``); without ``--ray`` nothing here is imported.
 
-Each missing (experiment, run, seed) becomes one Ray task that asks for one CPU (a DPPO run for one per worker) and
-runs :func:`rlbook.runner.train_one`, the function the local process pool runs, on whichever node Ray picks. It
+Each missing (experiment, run, seed) becomes one Ray task that asks for one CPU (a DPPO run for one per worker), and
+the memory its replay memory needs (:func:`task_memory`), and runs :func:`rlbook.runner.train_one`, the function the local process pool runs, on whichever node Ray picks. It
 trains in the run folder ``WORK/<experiment>/<run>/seed-<s>/`` *on that node* and writes its small outputs to a
 temporary results folder there; the task hands those files back, and the submitting machine writes them to its
 ``results/``: the same files, with the same provenance, as a local run (``meta.json`` records the command typed on
@@ -12,9 +12,12 @@ While the tasks run, each running seed reports its step and latest evaluation to
 that the submitting machine polls for its progress bars. Ctrl-C there cancels the tasks: each running seed gets a
 KeyboardInterrupt, writes its checkpoint and stops, as under the local pool, and the same command resumes it.
 
-A task whose worker process or node dies is retried by Ray (:data:`RETRIES` times). With ``--work`` (alias
-``--runs-dir``) on storage every node sees, the retry resumes from the seed's last checkpoint; otherwise a retry
-that lands on another node finds no checkpoint and starts the seed again, and the submitting machine says so.
+A seed that fails (its own error) is reported as it fails and the others go on; at the end :class:`SeedsFailed`
+lists the failed ones. A task whose worker process or node dies is retried by Ray (:data:`RETRIES` times). With
+``--work`` (alias ``--runs-dir``) on storage every node sees, the retry resumes from the seed's last checkpoint, and
+the submitting machine names its step; otherwise a retry that lands on another node finds no checkpoint and starts
+the seed again, and the submitting machine says so. An address where nothing answers is one line
+(:func:`check_answers`), not Ray's minutes of waiting.
 
 ``experiments snapshot --ray`` asks the boards of the ``experiments run --ray`` commands in progress where each seed
 trains, and runs :func:`rlbook.runner.snapshot_one` on that node; seeds no board knows are snapshot here, from the
@@ -31,6 +34,8 @@ import threading
 import uuid
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from rlbook.registry import RunSpec, run_paths
 from rlbook.runner import LOGS, SNAPSHOT, SNAPSHOT_POLICY, snapshot_one, train_one
@@ -61,6 +66,33 @@ def import_ray():
     return ray
 
 
+PROBE_SECONDS = 10.0
+"""How long the submitting machine waits for ``HOST:PORT`` to answer before it says no cluster is there (Ray itself
+would wait minutes, printing its own log lines)."""
+
+
+def host_port(address: str) -> tuple[str, int] | None:
+    """``(host, port)`` of an address ``HOST:PORT`` (or ``ray://HOST:PORT``), else None (``auto``, ``local``)."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    return (host.strip("[]"), int(port)) if host and port.isdigit() else None
+
+
+def check_answers(address: str) -> None:
+    """A one-line ValueError unless something answers at ``address`` (``HOST:PORT``) within :data:`PROBE_SECONDS`:
+    no Ray cluster is there, and the line says how to start one."""
+    import socket
+
+    where = host_port(address)
+    if where is None:
+        return
+    try:
+        socket.create_connection(where, timeout=PROBE_SECONDS).close()
+    except OSError as exc:
+        why = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or type(exc).__name__).lower()
+        raise ValueError(f"no Ray cluster answers at {address} ({why}); start one there with `ray start --head "
+                         f"--port {where[1]}` on {where[0]}, or train on this machine alone with --ray local") from None
+
+
 def connect(address: str, cpus: int | None = None):
     """Join the Ray cluster at ``address`` (``auto``: the one ``ray start`` runs on this machine; ``HOST:PORT``), or
     with ``local`` start one on this machine with ``cpus`` CPUs (default: all); a connected driver stays. Returns
@@ -74,6 +106,7 @@ def connect(address: str, cpus: int | None = None):
     ray = import_ray()
     if ray.is_initialized():
         return ray
+    check_answers(address)
     try:
         if address == "local":
             os.environ.setdefault("RAY_worker_niceness", str(os.nice(0)))
@@ -158,6 +191,17 @@ def last_value(path: Path, column: str) -> float | None:
         return None
 
 
+def checkpoint_step(path: Path) -> int | None:
+    """The step the checkpoint ``path`` was written at, the one a resume goes on from (None: none there, or not
+    readable). Memory-mapped: its replay memory is not read."""
+    import torch
+
+    try:
+        return int(torch.load(path, map_location="cpu", weights_only=True, mmap=True)["step"])
+    except Exception:  # missing, half-written, or of another kind: not resumable from here
+        return None
+
+
 def watch(work_dir: Path, key: str, board, stop: threading.Event) -> None:
     """Report the seed's step (``progress.csv``) and latest evaluation (``eval.csv``) to ``board`` when they change,
     every :data:`POLL_SECONDS`, until ``stop`` is set."""
@@ -176,7 +220,7 @@ def train_task(exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], wo
 
     work_dir, _ = run_paths(exp, spec.name, seed, tempfile.gettempdir(), work)
     key = seed_key(exp, spec.name, seed)
-    resumable = last_value(work_dir / "progress.csv", "step") if (work_dir / "checkpoint.pt").exists() else None
+    resumable = checkpoint_step(work_dir / "checkpoint.pt")
     node = ray.get_runtime_context().get_node_id()
     note = ray.get(board.attempt.remote(key, node, os.getpid(), resumable))
     if note:
@@ -205,14 +249,14 @@ class Board:
         self.seeds: dict[str, dict[str, Any]] = {}
 
     def attempt(self, key: str, node: str, pid: int, resumable: float | None) -> str | None:
-        """A task starts ``key`` on ``node`` in process ``pid``, with a checkpoint whose logs reach step
-        ``resumable`` (None: no checkpoint there). Returns what to say if this is a retry."""
+        """A task starts ``key`` on ``node`` in process ``pid``, with a checkpoint written at step ``resumable``
+        (None: no checkpoint there). Returns what to say if this is a retry."""
         seed = self.seeds.setdefault(key, {"attempts": [], "step": None, "eval": None, "notes": []})
         note = None
         if seed["attempts"]:
             died = seed["attempts"][-1]
             reached = f"step {int(seed['step']):,}" if seed["step"] is not None else "its start"
-            how = (f"resuming from its checkpoint (logs to step {int(resumable):,})" if resumable is not None else
+            how = (f"resuming from its checkpoint at step {int(resumable):,}" if resumable is not None else
                    "restarting from step 0: no checkpoint in its run folder there" +
                    (f" (the last one is on node {died['node'][:8]}; give --runs-dir on storage every node sees "
                     "to resume instead)" if died["node"] != node else ""))
@@ -275,14 +319,27 @@ def new_board(ray):
                                                  namespace=NAMESPACE).remote()
 
 
+class SeedsFailed(Exception):
+    """Seeds that failed on the cluster while the others went on: ``lines``, the status line of every seed (a failed
+    one's says why), and ``failures``, each failed seed's key and error."""
+
+    def __init__(self, lines: list[str], failures: list[tuple[str, BaseException]]):
+        super().__init__(f"{len(failures)} seed(s) failed: " + "; ".join(k for k, _ in failures))
+        self.lines, self.failures = lines, failures
+
+
 def run_on_ray(name: str, tasks: list[tuple[RunSpec, int]], results: Path, work: Path, address: str,
                cpus: int | None = None, progress: bool = True) -> list[str]:
     """Train each missing ``(spec, seed)`` of ``tasks`` of experiment ``name`` as a Ray task on the cluster at
     ``address`` (:func:`connect`) and write its results here; returns the status lines, as
-    :func:`rlbook.runner.train_all` does. A seed's failure, or Ctrl-C, cancels the others (:func:`stop`): each
-    running one checkpoints, so that the same command resumes them."""
+    :func:`rlbook.runner.train_all` does. A seed that fails is reported and the others go on; at the end,
+    :class:`SeedsFailed` if any did. Ctrl-C cancels them all (:func:`stop`): each running one checkpoints, so
+    that the same command resumes them. ``cpus`` (``--jobs``) is for ``local`` alone: a cluster's CPUs are its own."""
     from rlcore.provenance import command_line
 
+    if cpus is not None and address != "local":
+        raise ValueError(f"--jobs with --ray {address}: the cluster's CPUs decide how many seeds train at once; "
+                         "--jobs sets them only for a cluster of this machine alone (--ray local)")
     ray = connect(address, cpus)
     board, command, lines, refs = new_board(ray), command_line(), [], {}
     remote = ray.remote(train_task)
@@ -291,18 +348,54 @@ def run_on_ray(name: str, tasks: list[tuple[RunSpec, int]], results: Path, work:
         if (result_dir / "policy.pt").exists():
             lines.append(f"{seed_key(name, spec.name, s)}: already in {result_dir}")
             continue
-        ref = remote.options(num_cpus=spec.workers, max_retries=RETRIES, retry_exceptions=False,
-                             name=seed_key(name, spec.name, s)).remote(
+        ref = remote.options(num_cpus=spec.workers, memory=task_memory(spec), max_retries=RETRIES,
+                             retry_exceptions=False, name=seed_key(name, spec.name, s)).remote(
             name, spec, s, pack(result_dir), str(work), command, board)
         refs[ref] = (seed_key(name, spec.name, s), spec.steps, result_dir)
-    return lines + collect(ray, refs, board, name, progress)
+    done, failures = collect(ray, refs, board, name, progress)
+    if failures:
+        raise SeedsFailed(lines + done, failures)
+    return lines + done
 
 
-def collect(ray, refs: dict, board, desc: str, progress: bool) -> list[str]:
+PROCESS_BYTES = 512 * 2**20
+"""What a seed's process needs besides its replay memory (Python, torch, the simulator), for :func:`task_memory`."""
+
+
+def replay_bytes(spec: RunSpec) -> int:
+    """The bytes of the replay memory a seed of ``spec`` fills (0 for an algorithm without one): ``buffer_size``
+    transitions of two float32 observations, the action (float32 vector, or one int64), reward and end flag."""
+    from rlcore.algos import get_algorithm
+    from rlcore.envs import make_env
+
+    config = get_algorithm(spec.algo).make_config(spec.algo, **spec.overrides)
+    if not hasattr(config, "buffer_size"):
+        return 0
+    env = make_env(spec.env_id, **getattr(config, "env_kwargs", {}))
+    obs, act = env.observation_space, env.action_space
+    env.close()
+    action = 4 * int(np.prod(act.shape)) if act.shape else 8
+    return config.buffer_size * (2 * 4 * int(np.prod(obs.shape)) + action + 4 + 4)
+
+
+def task_memory(spec: RunSpec) -> int | None:
+    """The memory a seed's task reserves on its node (Ray's ``memory=``), so that Ray places no more seeds on a
+    machine than its memory holds: its replay memory and half again (a resume holds the loaded checkpoint's copy,
+    about half the memory, while it restores it), and :data:`PROCESS_BYTES`; None (no reservation) without a
+    replay memory, or where its settings or task are bad (the seed's own task then fails with the one-line error)."""
+    try:
+        replay = replay_bytes(spec)
+    except Exception:  # a bad setting or an unknown task: said by the seed's task, as any error of a seed
+        return None
+    return replay * 3 // 2 + PROCESS_BYTES if replay else None
+
+
+def collect(ray, refs: dict, board, desc: str, progress: bool) -> tuple[list[str], list[tuple[str, BaseException]]]:
     """Wait for the tasks ``refs`` (ref: key, steps, results folder), showing their progress; write each one's
-    results as it finishes; returns their status lines, with the notes of retried seeds."""
+    results as it finishes. Returns their status lines, with the notes of retried seeds, and the seeds that failed
+    (key, error), each reported as it fails while the others go on."""
     bars = SeedBars({key: steps for key, steps, _ in refs.values()}, desc, progress)
-    pending, lines = list(refs), []
+    pending, lines, failures = list(refs), [], []
     try:
         while pending:
             done, pending = ray.wait(pending, num_returns=1, timeout=POLL_SECONDS)
@@ -310,17 +403,34 @@ def collect(ray, refs: dict, board, desc: str, progress: bool) -> list[str]:
             bars.show(state)
             for ref in done:
                 key, _, result_dir = refs[ref]
-                line, files, there = outcome(ray, ref)
-                unpack(files, result_dir)
-                notes = state.get(key, {}).get("notes", [])
-                lines.append(line.replace(there, str(result_dir)) + "".join(f" ({n.split(': ', 1)[1]})" for n in notes))
+                notes = "".join(f" ({n.split(': ', 1)[1]})" for n in state.get(key, {}).get("notes", []))
+                try:
+                    line = finished(ray, ref, result_dir)
+                except Exception as exc:  # this seed's own error, or its worker died once too often
+                    failures.append((key, exc))
+                    line = f"{key}: failed: {one_line(exc)}"
+                    bars.tqdm.write(line, file=sys.stderr)
+                lines.append(line + notes)
                 bars.done(key)
-    except BaseException:  # Ctrl-C, or a seed that failed
+    except BaseException:  # Ctrl-C
         stop(ray, pending)
         raise
     finally:
         bars.close()
-    return lines
+    return lines, failures
+
+
+def finished(ray, ref, result_dir: Path) -> str:
+    """Write the results of the finished task ``ref`` to ``result_dir``; its status line, naming that folder."""
+    line, files, there = outcome(ray, ref)
+    unpack(files, result_dir)
+    return line.replace(there, str(result_dir))
+
+
+def one_line(exc: BaseException) -> str:
+    """An error as one line: its message's first line (with its type where that is not a plain ValueError)."""
+    first = (str(exc).strip().splitlines() or [""])[0]
+    return first if isinstance(exc, ValueError) and first else f"{type(exc).__name__}: {first}".rstrip(": ")
 
 
 def outcome(ray, ref):

@@ -6,6 +6,7 @@ install, and the local pool as before."""
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -17,7 +18,8 @@ import torch
 
 import rlbook as ex
 from portable import skip_or_fail
-from rlbook.cluster import BOARD_PREFIX, INSTALL, NAMESPACE, RAY_VERSION, Board, last_value
+from rlbook.cluster import (BOARD_PREFIX, INSTALL, NAMESPACE, PROCESS_BYTES, RAY_VERSION, Board, SeedsFailed,
+                            last_value, replay_bytes, task_memory)
 
 TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
     ex.RunSpec("ql", "q-learning", "FrozenLake-v1", 3_000, (0, 1), {"env_kwargs": {"is_slippery": False}}),
@@ -28,16 +30,22 @@ TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
                                                            "gradient_steps": 1, "eval_every": 1_000, "hidden": [16],
                                                            "checkpoint_every": 250}),
 ))
+BAD = ex.Experiment("bad-cluster", "a seed that cannot start, beside one that can", (
+    ex.RunSpec("dqn", "dqn", "CartPole-v1", 600, (0,), {"hidden": [16], "gamma": 2.0}),
+    ex.RunSpec("ql", "q-learning", "FrozenLake-v1", 3_000, (0,), {"env_kwargs": {"is_slippery": False}}),
+))
 HERE = Path(__file__).parent
-PINNED = {"RLCORE_TORCH_THREADS": "1", "OMP_NUM_THREADS": "1"}
-"""The environment the tests assert on (one torch thread a seed, as ``meta.json`` records), whatever the reader's
-shell says: set here, in the workers of the cluster (started from this process) and in the drivers started below."""
-UNSET = ("RLCORE_COMMAND", "RLCORE_COMMIT")
-"""Unset for the tests: the command and commit the runs record are the ones of the test."""
+PINNED = {"RLCORE_TORCH_THREADS": "1", "OMP_NUM_THREADS": "1", "RLCORE_COMMIT": "test-cluster"}
+"""The environment the tests assert on (one torch thread a seed, as ``meta.json`` records; one commit, whatever
+the checkout's files do while the tests run), whatever the reader's shell says: set here, in the workers of the
+cluster (started from this process) and in the drivers started below."""
+UNSET = ("RLCORE_COMMAND",)
+"""Unset for the tests: the command the runs record is the one of the test."""
 
 
 def register() -> None:
     ex.EXPERIMENTS[TINY.name] = lambda: TINY
+    ex.EXPERIMENTS[BAD.name] = lambda: BAD
 
 
 def driver_main(argv: list[str]) -> int:  # a submitting process, run by the tests below: `python -m rlbook ...`
@@ -145,16 +153,69 @@ def test_results_are_the_local_runners_bit_for_bit(cluster, reference, tmp_path)
     assert again == [f"{TINY.name}/dqn/seed-0: already in {results / TINY.name / 'dqn' / 'seed-0'}"]
 
 
-def test_a_seeds_own_error_comes_back_as_itself(cluster, tmp_path, monkeypatch):
+def test_a_seeds_own_error_comes_back_as_itself_and_the_other_seeds_go_on(cluster, tmp_path):
     # as from the local pool: a bad setting is the library's one-line error, not Ray's wrapper of a remote traceback
-    bad = ex.Experiment("bad-cluster", "a seed that cannot start", (
-        ex.RunSpec("dqn", "dqn", "CartPole-v1", 600, (0,), {"hidden": [16], "gamma": 2.0}),))
-    monkeypatch.setitem(ex.EXPERIMENTS, bad.name, lambda: bad)
     with pytest.raises(ValueError) as local:
-        ex.run_experiment(bad.name, results=tmp_path / "local", work=tmp_path / "runs-local", progress=False)
-    with pytest.raises(ValueError) as remote:
-        ex.run_experiment(bad.name, results=tmp_path / "results", work=tmp_path / "runs", ray="auto", progress=False)
-    assert type(remote.value) is type(local.value) and str(remote.value) == str(local.value)
+        ex.run_experiment(BAD.name, only=["dqn"], results=tmp_path / "local", work=tmp_path / "runs-local",
+                          progress=False)
+    results = tmp_path / "results"
+    with pytest.raises(SeedsFailed) as remote:
+        ex.run_experiment(BAD.name, results=results, work=tmp_path / "runs", ray="auto", progress=False)
+    ((key, error),) = remote.value.failures
+    assert key == f"{BAD.name}/dqn/seed-0" and type(error) is type(local.value) and str(error) == str(local.value)
+    assert sorted(remote.value.lines) == [f"{BAD.name}/dqn/seed-0: failed: {local.value}",
+                                          f"{BAD.name}/ql/seed-0: done -> {results / BAD.name / 'ql' / 'seed-0'}"]
+    assert (results / BAD.name / "ql" / "seed-0" / "policy.pt").exists()  # the other seed went on to its end
+
+
+def test_the_command_lists_the_failed_seeds_at_the_end_and_exits_non_zero(cluster, tmp_path):
+    argv = ["experiments", "run", BAD.name, "--ray", cluster, "--results", str(tmp_path / "results"),
+            "--runs-dir", str(tmp_path / "runs")]
+    done = subprocess.run(driver(argv), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1, done.stderr
+    assert f"{BAD.name}/ql/seed-0: done -> " in done.stdout and f"{BAD.name}/dqn/seed-0: failed: " in done.stdout
+    assert done.stderr.strip().splitlines()[-1] == (f"error: 1 seed(s) failed: {BAD.name}/dqn/seed-0; the others "
+                                                    "went on (their lines above say why)")
+    assert "Traceback" not in done.stderr
+
+
+def free_port() -> int:
+    """A TCP port of this machine where nothing listens (just now)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_an_address_where_no_cluster_answers_is_one_line_within_30_s(tmp_path):
+    port = free_port()
+    argv = ["experiments", "run", TINY.name, "--only", "ql", "--ray", f"127.0.0.1:{port}", "--results",
+            str(tmp_path / "results"), "--runs-dir", str(tmp_path / "runs")]
+    started = time.monotonic()
+    done = subprocess.run(driver(argv), capture_output=True, text=True, timeout=120)
+    assert time.monotonic() - started < 30
+    errors = [line for line in done.stderr.splitlines() if not line.startswith("warning: ")]  # a dirty tree warns
+    assert done.returncode == 2 and errors == [
+        f"error: no Ray cluster answers at 127.0.0.1:{port} (connection refused); start one there with `ray start "
+        f"--head --port {port}` on 127.0.0.1, or train on this machine alone with --ray local"], done.stderr
+    assert not (tmp_path / "results").exists()
+
+
+def test_jobs_with_a_clusters_address_is_one_line():
+    register()
+    with pytest.raises(ValueError, match=r"^--jobs with --ray 127.0.0.1:6379: the cluster's CPUs decide how many "
+                                         r"seeds train at once; --jobs sets them only .* \(--ray local\)$"):
+        ex.run_experiment(TINY.name, jobs=2, ray="127.0.0.1:6379", progress=False)
+
+
+def test_a_task_reserves_memory_for_its_replay():
+    humanoid = ex.RunSpec("td3", "td3", "Humanoid-v5", 1_000_000, (0,), {})
+    # 1M transitions of Humanoid: two observations of 348 float32, 17 float32 actions, reward and end flag
+    assert replay_bytes(humanoid) == 1_000_000 * (2 * 4 * 348 + 4 * 17 + 8)  # about 2.9 GB
+    assert task_memory(humanoid) == replay_bytes(humanoid) * 3 // 2 + PROCESS_BYTES
+    dqn = TINY.runs[1]  # CartPole: 4 float32 observations, one int64 action
+    assert replay_bytes(dqn) == 100_000 * (2 * 4 * 4 + 8 + 8)
+    assert task_memory(TINY.runs[0]) is None  # q-learning keeps no replay memory
+    assert task_memory(BAD.runs[0]) is None  # a bad setting: the seed's own task fails with it, as the local pool's
 
 
 def board_state(ray) -> dict:
@@ -200,9 +261,10 @@ def test_a_killed_worker_is_retried_and_resumes_from_its_checkpoint(cluster, ref
     assert not thread.is_alive()
     (line,) = out["lines"]
     assert line.startswith(f"{TINY.name}/long/seed-0: done -> {result_dir} (its worker (pid ")
-    assert "died at" in line and "resuming from its checkpoint" in line, line
+    assert "died at" in line and "resuming from its checkpoint at step " in line, line
     meta = json.loads((result_dir / "meta.json").read_text())
     assert len(meta["resumes"]) == 1 and 0 < meta["resumes"][0]["step"] < 4_000
+    assert f"resuming from its checkpoint at step {meta['resumes'][0]['step']:,})" in line  # the step it resumed
     assert meta["timing"]["from_step"] == meta["resumes"][0]["step"]  # the session that finished it, timed
     assert not (result_dir / ex.SNAPSHOT).exists()  # the finished seed replaced its snapshot
     assert_same_training(results, reference, "long", meta=False)  # resumed between two steps: the same run
@@ -256,8 +318,8 @@ def test_the_board_says_how_a_retried_seed_goes_on():
                     "restarting from step 0: no checkpoint in its run folder there (the last one is on node "
                     "aaaaaaaa; give --runs-dir on storage every node sees to resume instead)")
     board.report("e/r/seed-0", 2_000.0, None)
-    assert board.attempt("e/r/seed-0", "b" * 20, 13, 1_750.0).endswith(
-        "died at step 2,000; retried on node bbbbbbbb, resuming from its checkpoint (logs to step 1,750)")
+    assert board.attempt("e/r/seed-0", "b" * 20, 13, 1_750).endswith(
+        "died at step 2,000; retried on node bbbbbbbb, resuming from its checkpoint at step 1,750")
     assert len(board.state()["e/r/seed-0"]["notes"]) == 2 and board.state()["e/r/seed-0"]["step"] == 2_000.0
 
 
