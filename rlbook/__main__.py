@@ -44,8 +44,13 @@ def cmd_experiments(args: argparse.Namespace) -> int:
                     print(f"Wrote {path}")
         return 0
     if args.action == "snapshot":
+        take = None
+        if args.ray:  # each seed's snapshot on the node where it trains
+            from rlbook.cluster import ray_snapshots
+
+            take = ray_snapshots(args.ray)
         for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
-                                           work=work, policy=args.policy, ray=args.ray):
+                                           work=work, policy=args.policy, take=take):
             print(line)
         return 0
     if args.action == "run":
@@ -59,15 +64,15 @@ def run_and_report(args: argparse.Namespace, results: Path | None, work: Path | 
     that failed on a cluster, while the others went on, are listed last, and the exit status is 1."""
     import rlbook as ex
 
-    failed: tuple = ()  # what a cluster raises when seeds failed while the others went on
+    train, failed = ex.train_all, ()  # the backend; what it raises when seeds failed while the others went on
     if args.ray:
-        from rlbook.cluster import SeedsFailed
+        from rlbook.cluster import SeedsFailed, ray_backend
 
-        failed = (SeedsFailed,)
+        train, failed = ray_backend(args.ray), (SeedsFailed,)
     failures = []
     try:
         lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
-                                  results=results, work=work, ray=args.ray)
+                                  results=results, work=work, train=train)
     except KeyboardInterrupt:
         print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
               "when you run the same command again.", file=sys.stderr)

@@ -1,10 +1,13 @@
 """The experiment runner on a Ray cluster: ``experiments run NAME --ray ADDRESS`` and ``experiments snapshot NAME
---ray ADDRESS``. Ray is optional (``pip install ray==2.60.0``); without ``--ray`` nothing here is imported.
+--ray ADDRESS``. Ray is optional (``pip install ray==2.60.0``); without ``--ray`` nothing here is imported. The
+command line picks this backend (:func:`ray_backend`, :func:`ray_snapshots`) and hands it to the runner's
+``run_experiment`` and ``snapshot_experiment``; this module uses :mod:`rlbook.runner`, which never imports it.
 
-Each missing (experiment, run, seed) becomes one Ray task that asks for one CPU (a DPPO run for one per worker), and
-the memory its replay memory needs (:func:`task_memory`), and runs :func:`rlbook.runner.train_one`, the function the local process pool runs, on whichever node Ray picks. It
-trains in the run folder ``WORK/<experiment>/<run>/seed-<s>/`` *on that node* and writes its small outputs to a
-temporary results folder there; the task hands those files back, and the submitting machine writes them to its
+Each missing (experiment, run, seed) becomes one Ray task that asks for one CPU (a DPPO run for one per worker) and
+the memory its replay memory needs (:func:`task_memory`), and runs :func:`rlbook.runner.train_one`, the function
+the local process pool runs, on whichever node Ray picks. It trains in the run folder
+``WORK/<experiment>/<run>/seed-<s>/`` *on that node* and writes its small outputs to a temporary results folder
+there; the task hands those files back, and the submitting machine writes them to its
 ``results/``: the same files, with the same provenance, as a local run (``meta.json`` records the command typed on
 the submitting machine, and the node's machine, versions and commit).
 
@@ -32,6 +35,7 @@ import sys
 import tempfile
 import threading
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -317,6 +321,27 @@ def new_board(ray):
     """A :class:`Board` actor for one submission, named so that another driver finds it, alive while this one is."""
     return ray.remote(num_cpus=0)(Board).options(name=f"{BOARD_PREFIX}{uuid.uuid4().hex[:12]}",
                                                  namespace=NAMESPACE).remote()
+
+
+def ray_backend(address: str) -> Callable[..., list[str]]:
+    """The Ray cluster at ``address`` as :func:`rlbook.runner.run_experiment`'s ``train``: each task a seed on the
+    cluster (:func:`run_on_ray`; ``jobs``, for ``local`` alone, its CPUs)."""
+
+    def train(name: str, tasks: list[tuple[RunSpec, int]], jobs: int | None, results: Path, work: Path,
+              progress: bool = True) -> list[str]:
+        return run_on_ray(name, tasks, results, work.resolve(), address, cpus=jobs, progress=progress)
+
+    return train
+
+
+def ray_snapshots(address: str) -> Callable[..., list[str]]:
+    """The Ray cluster at ``address`` as :func:`rlbook.runner.snapshot_experiment`'s ``take``: each seed's snapshot
+    on the node where it trains (:func:`snapshot_on_ray`)."""
+
+    def take(name: str, picks: list[tuple[RunSpec, int]], results: Path, work: Path, policy: bool) -> list[str]:
+        return snapshot_on_ray(name, picks, results, work.resolve(), address, policy)
+
+    return take
 
 
 class SeedsFailed(Exception):

@@ -19,7 +19,7 @@ import torch
 import rlbook as ex
 from portable import skip_or_fail
 from rlbook.cluster import (BOARD_PREFIX, INSTALL, NAMESPACE, PROCESS_BYTES, RAY_VERSION, Board, SeedsFailed,
-                            last_value, replay_bytes, task_memory)
+                            last_value, ray_backend, ray_snapshots, replay_bytes, task_memory)
 
 TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
     ex.RunSpec("ql", "q-learning", "FrozenLake-v1", 3_000, (0, 1), {"env_kwargs": {"is_slippery": False}}),
@@ -140,16 +140,16 @@ def same(a, b) -> bool:
 
 def test_results_are_the_local_runners_bit_for_bit(cluster, reference, tmp_path):
     results = tmp_path / "results"
-    lines = ex.run_experiment(TINY.name, only=["ql", "dqn"], results=results, work=tmp_path / "runs", ray="auto",
-                              progress=False)
+    lines = ex.run_experiment(TINY.name, only=["ql", "dqn"], results=results, work=tmp_path / "runs",
+                              train=ray_backend("auto"), progress=False)
     assert sorted(lines) == sorted(f"{TINY.name}/{run}/seed-{s}: done -> {results / TINY.name / run / f'seed-{s}'}"
                                    for run, s in (("ql", 0), ("ql", 1), ("dqn", 0)))
     for run in ("ql", "dqn"):
         assert_same_training(results, reference, run)
     meta = json.loads((results / TINY.name / "dqn" / "seed-0" / "meta.json").read_text())
     assert meta["machine"]["torch_threads"] == 1
-    again = ex.run_experiment(TINY.name, only=["dqn"], results=results, work=tmp_path / "runs", ray="auto",
-                              progress=False)
+    again = ex.run_experiment(TINY.name, only=["dqn"], results=results, work=tmp_path / "runs",
+                              train=ray_backend("auto"), progress=False)
     assert again == [f"{TINY.name}/dqn/seed-0: already in {results / TINY.name / 'dqn' / 'seed-0'}"]
 
 
@@ -160,7 +160,8 @@ def test_a_seeds_own_error_comes_back_as_itself_and_the_other_seeds_go_on(cluste
                           progress=False)
     results = tmp_path / "results"
     with pytest.raises(SeedsFailed) as remote:
-        ex.run_experiment(BAD.name, results=results, work=tmp_path / "runs", ray="auto", progress=False)
+        ex.run_experiment(BAD.name, results=results, work=tmp_path / "runs", train=ray_backend("auto"),
+                          progress=False)
     ((key, error),) = remote.value.failures
     assert key == f"{BAD.name}/dqn/seed-0" and type(error) is type(local.value) and str(error) == str(local.value)
     assert sorted(remote.value.lines) == [f"{BAD.name}/dqn/seed-0: failed: {local.value}",
@@ -204,7 +205,7 @@ def test_jobs_with_a_clusters_address_is_one_line():
     register()
     with pytest.raises(ValueError, match=r"^--jobs with --ray 127.0.0.1:6379: the cluster's CPUs decide how many "
                                          r"seeds train at once; --jobs sets them only .* \(--ray local\)$"):
-        ex.run_experiment(TINY.name, jobs=2, ray="127.0.0.1:6379", progress=False)
+        ex.run_experiment(TINY.name, jobs=2, train=ray_backend("127.0.0.1:6379"), progress=False)
 
 
 def test_a_task_reserves_memory_for_its_replay():
@@ -245,11 +246,12 @@ def test_a_killed_worker_is_retried_and_resumes_from_its_checkpoint(cluster, ref
     work_dir, result_dir = ex.run_paths(TINY.name, "long", 0, results, work)
     out: dict = {}
     thread = threading.Thread(target=lambda: out.update(lines=ex.run_experiment(
-        TINY.name, only=["long"], results=results, work=work, ray="auto", progress=False)))
+        TINY.name, only=["long"], results=results, work=work, train=ray_backend("auto"), progress=False)))
     thread.start()
     wait_for(work_dir / "checkpoint.pt")
     # a snapshot through Ray while the seed trains: taken on its node, written here
-    (line,) = ex.snapshot_experiment(TINY.name, only=["long"], results=results, work=work, ray="auto")
+    (line,) = ex.snapshot_experiment(TINY.name, only=["long"], results=results, work=work,
+                                     take=ray_snapshots("auto"))
     assert line.startswith(f"{TINY.name}/long/seed-0: snapshot at step ") and line.endswith(")"), line
     assert json.loads((result_dir / ex.SNAPSHOT).read_text())["steps"] == 4_000
     key, deadline = f"{TINY.name}/long/seed-0", time.monotonic() + 300
@@ -289,7 +291,8 @@ def test_ctrl_c_cancels_the_tasks_and_leaves_the_seeds_resumable(cluster, refere
 
     # the interrupted task has ended: both of the cluster's CPUs are free again
     assert ray.get(ray.remote(num_cpus=2)(lambda: "free").remote(), timeout=120) == "free"
-    (line,) = ex.run_experiment(TINY.name, only=["long"], results=results, work=work, ray="auto", progress=False)
+    (line,) = ex.run_experiment(TINY.name, only=["long"], results=results, work=work, train=ray_backend("auto"),
+                                progress=False)
     assert line == f"{TINY.name}/long/seed-0: done -> {result_dir}"
     assert json.loads((result_dir / "meta.json").read_text())["resumes"]
     assert_same_training(results, reference, "long", meta=False)
