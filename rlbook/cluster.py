@@ -165,14 +165,26 @@ def command_typed(command: str | None):
             os.environ["RLCORE_COMMAND"] = before
 
 
+def source_results(spec: RunSpec, seed: int, results: Path, work: Path) -> dict[str, bytes]:
+    """For a seed that continues another run's (``spec.continues``), the submitting machine's results of that
+    run's seed (its ``policy.pt`` says it is finished), which the node's temporary results folder must hold too."""
+    if not spec.continues:
+        return {}
+    exp, run = spec.continues.split("/")
+    return pack(run_paths(exp, run, seed, results, work)[1])
+
+
 def on_node(fn, exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], work: str, command: str | None,
-            **kwargs: Any) -> tuple[str, dict[str, bytes], str]:
+            source: dict[str, bytes] | None = None, **kwargs: Any) -> tuple[str, dict[str, bytes], str]:
     """Run ``fn`` (:func:`~rlbook.runner.train_one` or :func:`~rlbook.runner.snapshot_one`) for one seed on this
-    node, with a temporary results folder that starts as the submitting machine's (``current``): returns its status
-    line, the folder's files afterwards, and the folder's path (which the line names)."""
+    node, with a temporary results folder that starts as the submitting machine's (``current``, and ``source``, the
+    results of the seed it continues, :func:`source_results`): returns its status line, the folder's files
+    afterwards, and the folder's path (which the line names)."""
     with tempfile.TemporaryDirectory(prefix="rlbook-results-") as tmp, command_typed(command):
         _, result_dir = run_paths(exp, spec.name, seed, tmp, work)
         unpack(current, result_dir)
+        if source:
+            unpack(source, run_paths(*spec.continues.split("/"), seed, tmp, work)[1])
         line = fn(exp, spec, seed, Path(tmp), Path(work), **kwargs)
         return line, pack(result_dir), str(result_dir)
 
@@ -218,8 +230,9 @@ def watch(work_dir: Path, key: str, board, stop: threading.Event) -> None:
 
 
 def train_task(exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], work: str, command: str | None,
-               board) -> tuple[str, dict[str, bytes], str]:
-    """One seed, on a Ray worker: :func:`~rlbook.runner.train_one` (:func:`on_node`), its progress on ``board``."""
+               board, source: dict[str, bytes] | None = None) -> tuple[str, dict[str, bytes], str]:
+    """One seed, on a Ray worker: :func:`~rlbook.runner.train_one` (:func:`on_node`), its progress on ``board``;
+    ``source``: the results of the seed it continues."""
     import ray
 
     work_dir, _ = run_paths(exp, spec.name, seed, tempfile.gettempdir(), work)
@@ -233,7 +246,7 @@ def train_task(exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], wo
     watcher = threading.Thread(target=watch, args=(work_dir, key, board, stop), daemon=True)
     watcher.start()
     try:
-        return on_node(train_one, exp, spec, seed, current, work, command)
+        return on_node(train_one, exp, spec, seed, current, work, command, source)
     finally:
         stop.set()
         watcher.join()
@@ -375,7 +388,7 @@ def run_on_ray(name: str, tasks: list[tuple[RunSpec, int]], results: Path, work:
             continue
         ref = remote.options(num_cpus=spec.workers, memory=task_memory(spec), max_retries=RETRIES,
                              retry_exceptions=False, name=seed_key(name, spec.name, s)).remote(
-            name, spec, s, pack(result_dir), str(work), command, board)
+            name, spec, s, pack(result_dir), str(work), command, board, source_results(spec, s, results, work))
         refs[ref] = (seed_key(name, spec.name, s), spec.steps, result_dir)
     done, failures = collect(ray, refs, board, name, progress)
     if failures:

@@ -88,10 +88,13 @@ def start_from(spec: RunSpec, seed: int, work_dir: Path, results: Path, work: Pa
     exp, run = spec.continues.split("/")
     (source,) = chosen_runs(exp, [run])
     source_work, source_results = run_paths(exp, run, seed, results, work)
-    if not (source_results / "policy.pt").exists() or not (source_work / "checkpoint.pt").exists():
-        raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is not finished in "
-                         f"{source_work}: finish it first with `python -m rlbook experiments run {exp} --only {run} "
-                         f"--seeds {seed}`")
+    if not (source_results / "policy.pt").exists():
+        raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is not finished: finish "
+                         f"it first with `python -m rlbook experiments run {exp} --only {run} --seeds {seed}`")
+    if not (source_work / "checkpoint.pt").exists():
+        raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is finished but whose "
+                         f"checkpoint is not in {source_work} (on a cluster: give --runs-dir on storage every node "
+                         "sees)")
     if source.overrides != spec.overrides or source.algo != spec.algo or source.env_id != spec.env_id:
         raise ValueError(f"{spec.name} continues {exp}/{run} with other settings; a continued run keeps them all")
     work_dir.mkdir(parents=True, exist_ok=True)

@@ -19,7 +19,9 @@ import torch
 import rlbook as ex
 from portable import skip_or_fail
 from rlbook.cluster import (BOARD_PREFIX, INSTALL, NAMESPACE, PROCESS_BYTES, RAY_VERSION, Board, SeedsFailed,
-                            last_value, ray_backend, ray_snapshots, replay_bytes, task_memory)
+                            last_value, on_node, ray_backend, ray_snapshots, replay_bytes, source_results,
+                            task_memory)
+from rlbook.runner import train_one
 
 TINY = ex.Experiment("tiny-cluster", "a test experiment for the Ray backend", (
     ex.RunSpec("ql", "q-learning", "FrozenLake-v1", 3_000, (0, 1), {"env_kwargs": {"is_slippery": False}}),
@@ -334,6 +336,29 @@ def test_last_value_reads_the_last_row_of_a_log(tmp_path):
     log.write_text("episode,step,episode_return\n" + "".join(f"{i},{20 * i},{i}.5\n" for i in range(1, 2_000)))
     assert last_value(log, "step") == 39_980 and last_value(log, "episode_return") == 1_999.5
     assert last_value(log, "no-such-column") is None
+
+
+def test_a_continued_run_starts_on_a_node_from_the_submitting_machines_results(tmp_path, monkeypatch):
+    # on a node, a seed trains with a temporary results folder: the source seed's results must come along (no Ray
+    # needed: the function a task runs, here)
+    from dataclasses import replace
+
+    short = ex.RunSpec("short", "q-learning", "FrozenLake-v1", 1_000, (0,), {"env_kwargs": {"is_slippery": False}})
+    longer = replace(short, name="long", steps=2_000, continues="tiny-continued/short")
+    exp = ex.Experiment("tiny-continued", "a run that continues another", (short, longer))
+    monkeypatch.setitem(ex.EXPERIMENTS, exp.name, lambda: exp)
+    results, work = tmp_path / "results", tmp_path / "runs"
+    with pytest.raises(ValueError, match=r"continues tiny-continued/short seed 0, which is not finished: finish it"):
+        on_node(train_one, exp.name, longer, 0, {}, str(work), None, source_results(longer, 0, results, work))
+    ex.run_experiment(exp.name, only=["short"], results=results, work=work, progress=False)
+    line, files, there = on_node(train_one, exp.name, longer, 0, {}, str(work), None,
+                                 source_results(longer, 0, results, work))
+    assert line == f"{exp.name}/long/seed-0: done -> {there}"
+    assert json.loads(files["continued.json"]) == {"continues": "tiny-continued/short", "seed": 0, "from_step": 1_000}
+    (tmp_path / "elsewhere").mkdir()  # a node whose work folder lacks the source's checkpoint says where it looked
+    with pytest.raises(ValueError, match=r"which is finished but whose checkpoint is not in .*elsewhere.* --runs-dir"):
+        on_node(train_one, exp.name, longer, 0, {}, str(tmp_path / "elsewhere"), None,
+                source_results(longer, 0, results, work))
 
 
 def test_the_pinned_ray_is_the_one_requirements_install():
