@@ -5,6 +5,7 @@
     python -m rlbook experiments status dqn-cartpole
     python -m rlbook experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
     python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir /shared/runs   # on a Ray cluster
+    python -m rlbook experiments status td3-sac-1m --ray auto     # and its seeds in flight there
 
 Training one agent, evaluating and rendering it are the library's: ``python -m rlcore train | evaluate | render``.
 """
@@ -56,6 +57,10 @@ def cmd_experiments(args: argparse.Namespace) -> int:
     if args.action == "run":
         return run_and_report(args, results, work)
     print("\n".join(ex.status_lines(args.name, results, work)))
+    if args.ray:  # and the seeds in flight on the cluster: where, step, last checkpoint
+        from rlbook.cluster import in_flight_lines
+
+        print("\n".join(in_flight_lines(args.name, args.ray)))
     return 0
 
 
@@ -101,7 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--ray", metavar="ADDRESS",
                    help="run: each seed as a task on a Ray cluster (auto: the one `ray start` joined this machine "
                         "to; HOST:PORT; local: start one on this machine), results written here; snapshot: take "
-                        "each seed's snapshot on the node where it trains. Needs `pip install ray==2.60.0`")
+                        "each seed's snapshot on the node where it trains; status: also the seeds in flight on the "
+                        "cluster (node, step, last checkpoint). Needs `pip install ray==2.60.0`")
     x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
     x.add_argument("--seeds", type=seed_list, help="comma-separated subset of the seeds, e.g. 0,1")
     x.add_argument("--episodes", type=count(1), default=5, help="reevaluate: episodes per seed")
