@@ -299,13 +299,20 @@ def test_a_killed_worker_is_retried_and_resumes_from_its_checkpoint(cluster, ref
         time.sleep(0.05)  # the cluster's list of named actors can lag behind (a bound, as wait_for's)
     assert key in seeds, (f"{key} did not reach the run's board within 300 s; boards: {seen}; the submitting "
                           f"thread: {'alive' if thread.is_alive() else 'ended'}, {out.get('error')!r}")
-    # a snapshot through Ray while the seed trains: taken on its node (which the board names), written here
-    (line,) = ex.snapshot_experiment(TINY.name, only=["long"], results=results, work=work,
-                                     take=ray_snapshots("auto"))
-    assert line.startswith(f"{TINY.name}/long/seed-0: snapshot at step ") and line.endswith(")"), line
-    assert line.endswith(f" (from node {seeds[key]['attempts'][-1]['node'][:8]})"), line
-    assert json.loads((result_dir / ex.SNAPSHOT).read_text())["steps"] == 4_000
-    os.kill(seeds[key]["attempts"][-1]["pid"], signal.SIGKILL)
+    # a snapshot through Ray of the seed in training: taken on its node (which the board names), written here. The
+    # seed is stopped meanwhile (its files stay), so that it cannot finish before it is killed, however slow the
+    # snapshot's new worker is to start on a loaded machine
+    pid = seeds[key]["attempts"][-1]["pid"]
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        assert thread.is_alive() and not (result_dir / "policy.pt").exists(), "the seed finished before it stopped"
+        (line,) = ex.snapshot_experiment(TINY.name, only=["long"], results=results, work=work,
+                                         take=ray_snapshots("auto"))
+        assert line.startswith(f"{TINY.name}/long/seed-0: snapshot at step ") and line.endswith(")"), line
+        assert line.endswith(f" (from node {seeds[key]['attempts'][-1]['node'][:8]})"), line
+        assert json.loads((result_dir / ex.SNAPSHOT).read_text())["steps"] == 4_000
+    finally:  # never leave a stopped worker to the cluster: killed, Ray starts another
+        os.kill(pid, signal.SIGKILL)
     thread.join(timeout=300)
     assert not thread.is_alive()
     (line,) = out["lines"]
