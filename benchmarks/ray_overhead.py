@@ -54,8 +54,10 @@ def timed_run(folder: Path, ray: str | None, seeds: int) -> dict[str, float]:
     import rlbook as ex
 
     start = time.perf_counter()
+    from rlbook.cluster import ray_backend
+
     ex.run_experiment(NAME, jobs=None if ray else CPUS, seeds=list(range(seeds)), results=folder / "results",
-                      work=folder / "runs", ray=ray, progress=False)
+                      work=folder / "runs", train=ray_backend(ray) if ray else ex.train_all, progress=False)
     wall = time.perf_counter() - start
     timing = [json.loads(p.read_text())["timing"] for p in (folder / "results").rglob("meta.json")]
     training = sum(t["wall_seconds"] for t in timing)

@@ -5,6 +5,7 @@
     python -m rlbook experiments status dqn-cartpole
     python -m rlbook experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
     python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir /shared/runs   # on a Ray cluster
+    python -m rlbook experiments status td3-sac-1m --ray auto     # and its seeds in flight there
 
 Training one agent, evaluating and rendering it are the library's: ``python -m rlcore train | evaluate | render``.
 """
@@ -44,21 +45,51 @@ def cmd_experiments(args: argparse.Namespace) -> int:
                     print(f"Wrote {path}")
         return 0
     if args.action == "snapshot":
+        take = None
+        if args.ray:  # each seed's snapshot on the node where it trains
+            from rlbook.cluster import ray_snapshots
+
+            take = ray_snapshots(args.ray)
         for line in ex.snapshot_experiment(args.name, only=args.only, seeds=args.seeds, results=results,
-                                           work=work, policy=args.policy, ray=args.ray):
+                                           work=work, policy=args.policy, take=take):
             print(line)
         return 0
     if args.action == "run":
-        try:
-            lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
-                                      results=results, work=work, ray=args.ray)
-        except KeyboardInterrupt:
-            print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
-                  "when you run the same command again.", file=sys.stderr)
-            return EXIT_INTERRUPTED
-        print("\n".join(lines))
+        return run_and_report(args, results, work)
     print("\n".join(ex.status_lines(args.name, results, work)))
+    if args.ray:  # and the seeds in flight on the cluster: where, step, last checkpoint
+        from rlbook.cluster import in_flight_lines
+
+        print("\n".join(in_flight_lines(args.name, args.ray)))
     return 0
+
+
+def run_and_report(args: argparse.Namespace, results: Path | None, work: Path | None) -> int:
+    """``experiments run``: train the missing seeds, print their status lines and the experiment's status. Seeds
+    that failed on a cluster, while the others went on, are listed last, and the exit status is 1."""
+    import rlbook as ex
+
+    train, failed = ex.train_all, ()  # the backend; what it raises when seeds failed while the others went on
+    if args.ray:
+        from rlbook.cluster import SeedsFailed, ray_backend
+
+        train, failed = ray_backend(args.ray), (SeedsFailed,)
+    failures = []
+    try:
+        lines = ex.run_experiment(args.name, jobs=args.jobs, only=args.only, seeds=args.seeds,
+                                  results=results, work=work, train=train)
+    except KeyboardInterrupt:
+        print("\nInterrupted. Finished runs are in results/; the others resume from their checkpoints "
+              "when you run the same command again.", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except failed as exc:
+        lines, failures = exc.lines, exc.failures
+    print("\n".join(lines))
+    print("\n".join(ex.status_lines(args.name, results, work)))
+    if failures:
+        print(f"error: {len(failures)} seed(s) failed: " + ", ".join(key for key, _ in failures) +
+              "; the others went on (their lines above say why)", file=sys.stderr)
+    return 1 if failures else 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,7 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--ray", metavar="ADDRESS",
                    help="run: each seed as a task on a Ray cluster (auto: the one `ray start` joined this machine "
                         "to; HOST:PORT; local: start one on this machine), results written here; snapshot: take "
-                        "each seed's snapshot on the node where it trains. Needs `pip install ray==2.60.0`")
+                        "each seed's snapshot on the node where it trains; status: also the seeds in flight on the "
+                        "cluster (node, step, last checkpoint). Needs `pip install ray==2.60.0`")
     x.add_argument("--only", action="append", metavar="RUN", help="only this configuration (repeatable)")
     x.add_argument("--seeds", type=seed_list, help="comma-separated subset of the seeds, e.g. 0,1")
     x.add_argument("--episodes", type=count(1), default=5, help="reevaluate: episodes per seed")

@@ -88,10 +88,13 @@ def start_from(spec: RunSpec, seed: int, work_dir: Path, results: Path, work: Pa
     exp, run = spec.continues.split("/")
     (source,) = chosen_runs(exp, [run])
     source_work, source_results = run_paths(exp, run, seed, results, work)
-    if not (source_results / "policy.pt").exists() or not (source_work / "checkpoint.pt").exists():
-        raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is not finished in "
-                         f"{source_work}: finish it first with `python -m rlbook experiments run {exp} --only {run} "
-                         f"--seeds {seed}`")
+    if not (source_results / "policy.pt").exists():
+        raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is not finished: finish "
+                         f"it first with `python -m rlbook experiments run {exp} --only {run} --seeds {seed}`")
+    if not (source_work / "checkpoint.pt").exists():
+        raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is finished but whose "
+                         f"checkpoint is not in {source_work} (on a cluster: give --runs-dir on storage every node "
+                         "sees)")
     if source.overrides != spec.overrides or source.algo != spec.algo or source.env_id != spec.env_id:
         raise ValueError(f"{spec.name} continues {exp}/{run} with other settings; a continued run keeps them all")
     work_dir.mkdir(parents=True, exist_ok=True)
@@ -193,25 +196,26 @@ def snapshot_one(exp: str, spec: RunSpec, seed: int, results: Path | None = None
 
 def snapshot_experiment(name: str, only: list[str] | None = None, seeds: list[int] | None = None,
                         results: Path | None = None, work: Path | None = None, policy: bool = False,
-                        ray: str | None = None) -> list[str]:
-    """:func:`snapshot_one` for every chosen seed of an experiment; with ``ray`` (a cluster's address), on the node
-    where each seed trains (:func:`rlbook.cluster.snapshot_on_ray`)."""
+                        take: Callable[..., list[str]] | None = None) -> list[str]:
+    """:func:`snapshot_one` for every chosen seed of an experiment, here; or with ``take`` (another backend's, such as
+    :func:`rlbook.cluster.ray_snapshots`, which the command line picks), ``take(name, picks, results, work, policy)``
+    for the chosen ``(spec, seed)`` picks."""
     picks = [(spec, s) for spec in chosen_runs(name, only) for s in spec.seeds if seeds is None or s in seeds]
     results, work = results or paths.results_dir(), work or paths.work_dir()
-    if ray:
-        from rlbook.cluster import snapshot_on_ray
-
-        return snapshot_on_ray(name, picks, results, work.resolve(), ray, policy)
+    if take is not None:
+        return take(name, picks, results, work, policy)
     return [snapshot_one(name, spec, s, results, work, policy) for spec, s in picks]
 
 
-def train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int, results: Path, work: Path,
+def train_all(name: str, tasks: list[tuple[RunSpec, int]], jobs: int | None, results: Path, work: Path,
               progress: bool = True) -> list[str]:
     """Train each ``(spec, seed)`` of ``tasks`` of experiment ``name`` with :func:`train_one`, ``jobs`` processes at a
-    time (:func:`run_in_pool`), with a progress bar over runs; returns their status lines."""
+    time (:func:`run_in_pool`; default 1), with a progress bar over runs; returns their status lines. The local
+    backend of :func:`run_experiment`."""
     from tqdm import tqdm
 
     lines: list[str] = []
+    jobs = jobs or 1
     with tqdm(total=len(tasks), desc=name, unit="run", disable=not progress) as bar:
         if jobs <= 1:
             for spec, s in tasks:
@@ -273,14 +277,14 @@ def chosen_runs(name: str, only: list[str] | None = None) -> list[RunSpec]:
 
 
 def run_experiment(name: str, jobs: int | None = None, only: list[str] | None = None, seeds: list[int] | None = None,
-                   results: Path | None = None, work: Path | None = None, ray: str | None = None,
-                   progress: bool = True) -> list[str]:
+                   results: Path | None = None, work: Path | None = None, progress: bool = True,
+                   train: Callable[..., list[str]] = train_all) -> list[str]:
     """Train every missing (run, seed) of an experiment, ``jobs`` processes at a time (default 1), in ``work`` with
     the small outputs copied to ``results`` (default: the book's ``runs/`` and ``results/``, :mod:`rlbook.paths`).
 
-    With ``ray``, a Ray cluster's address (``auto``, ``HOST:PORT``, or ``local`` for one of this machine with
-    ``jobs`` CPUs, default all), each seed is a task on the cluster (:func:`rlbook.cluster.run_on_ray`), its
-    results written here all the same."""
+    ``train(name, tasks, jobs, results, work, progress)`` trains the chosen ``(spec, seed)`` tasks: this machine's
+    processes (:func:`train_all`), or another backend that the command line picks, such as a Ray cluster's
+    (:func:`rlbook.cluster.ray_backend`, which uses this module; this module never imports it)."""
     chosen = chosen_runs(name, only)
     tasks = [(spec, s) for spec in chosen for s in spec.seeds if seeds is None or s in seeds]
     if not tasks:
@@ -291,8 +295,4 @@ def run_experiment(name: str, jobs: int | None = None, only: list[str] | None = 
     if warning := dirty_warning():  # the runs record what was uncommitted; a clean tree needs no record
         print(warning, file=sys.stderr)
     results, work = results or paths.results_dir(), work or paths.work_dir()
-    if ray:
-        from rlbook.cluster import run_on_ray
-
-        return run_on_ray(name, tasks, results, work.resolve(), ray, cpus=jobs, progress=progress)
-    return train_all(name, tasks, jobs or 1, results, work, progress)
+    return train(name, tasks, jobs, results, work, progress)

@@ -59,3 +59,10 @@ def test_each_package_docstring_names_every_module():
         names = {f".".join((package.__name__, f.stem)) for f in folder.glob("*.py") if f.stem != "__init__"}
         missing = sorted(n for n in names if f":mod:`{n}`" not in package.__doc__)
         assert not missing, f"{package.__name__}'s docstring does not name {missing}"
+
+
+def test_the_cluster_backend_imports_the_runner_never_the_reverse():
+    # the command line picks the backend; the backend uses the runner (issue 57, item 8)
+    runner, cluster = ROOT / "rlbook" / "runner.py", ROOT / "rlbook" / "cluster.py"
+    assert "rlbook.runner" in imported_modules(cluster)
+    assert not {m for m in imported_modules(runner) if m == "rlbook.cluster" or m.startswith("rlbook.cluster.")}
