@@ -30,3 +30,16 @@ def test_an_unknown_stage_is_one_line(monkeypatch, script_module):
     with pytest.raises(SystemExit) as stop:
         script_module("benchmarks/wait_ratio.py").main(["--stages", "tests,docs"])
     assert "--stages takes tests and/or book" in str(stop.value.code)
+
+
+def test_the_readme_quotes_the_recorded_wait():
+    import json
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    record = json.loads((root / "results" / "benchmarks" / "wait-ratio.json").read_text())
+    readme = " ".join((root / "README.md").read_text().split())
+    tests, book = (record["stages"][s]["head"]["wall_seconds"] for s in ("tests", "book"))
+    assert f"the whole run takes about five minutes ({tests:.0f} s)" in readme
+    assert f"the book build below about five more ({book:.0f} s)" in readme
+    assert "Intel Xeon" in record["machine"]["cpu_model"] and "AVX-512" in record["machine"]["cpu_model"]
