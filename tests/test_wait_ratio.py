@@ -42,4 +42,4 @@ def test_the_readme_quotes_the_recorded_wait():
     tests, book = (record["stages"][s]["head"]["wall_seconds"] for s in ("tests", "book"))
     assert f"the whole run takes about five minutes ({tests:.0f} s)" in readme
     assert f"the book build below about five more ({book:.0f} s)" in readme
-    assert "Intel Xeon" in record["machine"]["cpu_model"] and "AVX-512" in record["machine"]["cpu_model"]
+    assert "Xeon" in record["machine"]["cpu_model"] and "AVX-512" in record["machine"]["cpu_model"]  # "Intel Xeon"
