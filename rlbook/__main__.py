@@ -5,6 +5,7 @@
     python -m rlbook experiments status dqn-cartpole
     python -m rlbook experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
     python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir /shared/runs   # on a Ray cluster
+    python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir /shared/runs --detach   # and close the terminal
     python -m rlbook experiments status td3-sac-1m --ray auto     # and its seeds in flight there
 
 Training one agent, evaluating and rendering it are the library's: ``python -m rlcore train | evaluate | render``.
@@ -13,7 +14,10 @@ Training one agent, evaluating and rendering it are the library's: ``python -m r
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 from rlcore.cli import EXIT_INTERRUPTED, Parser, count, run_command, seed_list
@@ -55,6 +59,8 @@ def cmd_experiments(args: argparse.Namespace) -> int:
             print(line)
         return 0
     if args.action == "run":
+        if args.detach:
+            return detach(args, work)
         return run_and_report(args, results, work)
     print("\n".join(ex.status_lines(args.name, results, work)))
     if args.ray:  # and the seeds in flight on the cluster: where, step, last checkpoint
@@ -92,6 +98,29 @@ def run_and_report(args: argparse.Namespace, results: Path | None, work: Path | 
     return 1 if failures else 0
 
 
+def detach(args: argparse.Namespace, work: Path | None) -> int:
+    """``experiments run ... --detach``: the same command without ``--detach``, started in a session of its own (no
+    terminal: closing this one sends it no hangup), its input from nothing and its output to a log in the work folder;
+    prints where, and returns at once. ``kill PID`` stops it as Ctrl-C would: its seeds checkpoint, and the same
+    command resumes them."""
+    from rlbook import chosen_runs, paths
+
+    chosen = chosen_runs(args.name, args.only)  # what the command would refuse, refused here, in one line
+    if args.seeds is not None and not any(s in spec.seeds for spec in chosen for s in args.seeds):
+        raise ValueError(f"{args.name} has no seed {args.seeds} in the runs chosen")
+    log = (work or paths.work_dir()) / args.name / f"driver-{time.strftime('%Y%m%d-%H%M%S')}.log"
+    log.parent.mkdir(parents=True, exist_ok=True)
+    argv = [a for a in args.argv if a != "--detach"]
+    with open(os.devnull, "rb") as nothing, log.open("ab") as out:
+        child = subprocess.Popen([sys.executable, "-m", "rlbook", *argv], stdin=nothing, stdout=out,
+                                 stderr=subprocess.STDOUT, start_new_session=True, close_fds=True)
+    print(f"experiments run {args.name}: running in the background as process {child.pid}, in a session of its own "
+          f"(closing this terminal does not stop it); output: {log}; `kill {child.pid}` stops it (its seeds "
+          "checkpoint, and the same command resumes them); `python -m rlbook experiments status "
+          f"{args.name}` shows where it is")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = Parser(prog="python -m rlbook", description="The book's full-budget experiments (resumable).")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
@@ -119,12 +148,22 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--work", "--runs-dir", dest="work",
                    help="where runs train and keep full checkpoints (default: ROOT/runs); with --ray, the same path "
                         "on every node: on storage every node sees, a seed retried elsewhere resumes there")
+    x.add_argument("--detach", action="store_true",
+                   help="run: start it in the background, in a session of its own, and return at once: closing the "
+                        "terminal does not stop it; its output goes to a log in the work folder, whose path is "
+                        "printed with the process ID (`kill PID` stops it as Ctrl-C does)")
     x.set_defaults(func=cmd_experiments)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_command(build_parser().parse_args(argv))
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(argv)
+    args.argv = argv  # what --detach starts again, without itself
+    if args.detach and args.action != "run":
+        print(f"error: --detach is for `experiments run`, not `experiments {args.action}`", file=sys.stderr)
+        return 2
+    return run_command(args)
 
 
 if __name__ == "__main__":
