@@ -442,7 +442,7 @@ A2C_PENDULUM: dict[str, Any] = {"n_steps": 8, "gamma": 0.9, "gae_lambda": 0.9, "
 
 def _a2c_cartpole_pendulum() -> Experiment:
     # 4.1: A2C on CartPole-v1 with its defaults (40k steps, about DQN's budget in chapter 2) and on Pendulum-v1 with
-    # A2C_PENDULUM (300k steps), 3 seeds each. About ten minutes on one core; stored so that the book build does not
+    # A2C_PENDULUM (300k steps), 3 seeds each. A few minutes on one core; stored so that the book build does not
     # train it again every time.
     seeds = (0, 1, 2)
     return Experiment(
