@@ -27,6 +27,8 @@ def cmd_experiments(args: argparse.Namespace) -> int:
     import rlbook as ex
     from rlbook import paths
 
+    if args.detach and args.action != "run":
+        raise ValueError(f"--detach is for `experiments run`, not `experiments {args.action}`")
     if args.action == "list":
         for name in sorted(ex.EXPERIMENTS):
             exp = ex.get_experiment(name)
@@ -103,11 +105,10 @@ def detach(args: argparse.Namespace, work: Path | None) -> int:
     terminal: closing this one sends it no hangup), its input from nothing and its output to a log in the work folder;
     prints where, and returns at once. ``kill PID`` stops it as Ctrl-C would: its seeds checkpoint, and the same
     command resumes them."""
-    from rlbook import chosen_runs, paths
+    from rlbook import paths
+    from rlbook.runner import chosen_tasks
 
-    chosen = chosen_runs(args.name, args.only)  # what the command would refuse, refused here, in one line
-    if args.seeds is not None and not any(s in spec.seeds for spec in chosen for s in args.seeds):
-        raise ValueError(f"{args.name} has no seed {args.seeds} in the runs chosen")
+    chosen_tasks(args.name, args.only, args.seeds)  # what the command would refuse, refused here, in one line
     log = (work or paths.work_dir()) / args.name / f"driver-{time.strftime('%Y%m%d-%H%M%S')}.log"
     log.parent.mkdir(parents=True, exist_ok=True)
     argv = [a for a in args.argv if a != "--detach"]
@@ -160,9 +161,6 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     args.argv = argv  # what --detach starts again, without itself
-    if args.detach and args.action != "run":
-        print(f"error: --detach is for `experiments run`, not `experiments {args.action}`", file=sys.stderr)
-        return 2
     return run_command(args)
 
 

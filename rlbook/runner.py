@@ -276,6 +276,16 @@ def chosen_runs(name: str, only: list[str] | None = None) -> list[RunSpec]:
     return [spec for spec in exp.runs if not only or spec.name in only]
 
 
+def chosen_tasks(name: str, only: list[str] | None = None, seeds: list[int] | None = None) -> list[tuple[RunSpec, int]]:
+    """The ``(spec, seed)`` pairs that ``--only`` and ``--seeds`` choose (all without them); none is an error."""
+    chosen = chosen_runs(name, only)
+    tasks = [(spec, s) for spec in chosen for s in spec.seeds if seeds is None or s in seeds]
+    if not tasks:
+        known = sorted({s for spec in chosen for s in spec.seeds})
+        raise ValueError(f"{name} has no seed {seeds} in the runs chosen; their seeds: {known}.")
+    return tasks
+
+
 def run_experiment(name: str, jobs: int | None = None, only: list[str] | None = None, seeds: list[int] | None = None,
                    results: Path | None = None, work: Path | None = None, progress: bool = True,
                    train: Callable[..., list[str]] = train_all) -> list[str]:
@@ -285,11 +295,7 @@ def run_experiment(name: str, jobs: int | None = None, only: list[str] | None = 
     ``train(name, tasks, jobs, results, work, progress)`` trains the chosen ``(spec, seed)`` tasks: this machine's
     processes (:func:`train_all`), or another backend that the command line picks, such as a Ray cluster's
     (:func:`rlbook.cluster.ray_backend`, which uses this module; this module never imports it)."""
-    chosen = chosen_runs(name, only)
-    tasks = [(spec, s) for spec in chosen for s in spec.seeds if seeds is None or s in seeds]
-    if not tasks:
-        known = sorted({s for spec in chosen for s in spec.seeds})
-        raise ValueError(f"{name} has no seed {seeds} in the runs chosen; their seeds: {known}.")
+    tasks = chosen_tasks(name, only, seeds)
     from rlcore.provenance import dirty_warning
 
     if warning := dirty_warning():  # the runs record what was uncommitted; a clean tree needs no record

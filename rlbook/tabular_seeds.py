@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
+import functools
 import hashlib
 import json
 import multiprocessing as mp
@@ -85,8 +86,9 @@ CODE = ("rlcore/tabular.py", "rlcore/harness.py", "rlcore/envs.py")
 makes every stored run stale, and a page trains it again."""
 
 
+@functools.cache
 def code_sha256() -> str:
-    """The sources of :data:`CODE`, hashed together."""
+    """The sources of :data:`CODE`, hashed together (once a process: the code it runs does not change)."""
     root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
     for name in CODE:
