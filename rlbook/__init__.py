@@ -114,4 +114,4 @@ from rlbook.analysis import (  # noqa: F401
     iqm_difference_ci,
     ablation_rows,
 )
-from rlbook.pages import PageRuns, check_printed, check_results, printed_numbers  # noqa: F401
+from rlbook.pages import PageRuns, check_printed, check_results, finished_runs, printed_numbers  # noqa: F401

@@ -114,6 +114,18 @@ def check_results(name: str, results: dict[str, RunResults] | None = None) -> No
                 raise ValueError(f"{where}: an evaluation has other than {config['eval_episodes']} episodes")
 
 
+def finished_runs(name: str, results: dict[str, RunResults] | None = None) -> dict[str, RunResults]:
+    """Every run of experiment ``name`` with all of its seeds, from ``results/``, checked against the registry
+    (:func:`check_results`): for a page that reads a stored experiment and trains nothing. A seed still missing is
+    one line that names the command that trains it."""
+    results = load_experiment(name) if results is None else results
+    check_results(name, results)
+    missing = {run: r.missing for run, r in results.items() if r.missing}
+    if missing:
+        raise ValueError(f"results/{name} lacks seeds {missing}: run `python -m rlbook experiments run {name}`")
+    return results
+
+
 def _as_json(value: Any) -> Any:
     """A registry value as config.json stores it (tuples become lists)."""
     if isinstance(value, (tuple, list)):

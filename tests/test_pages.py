@@ -153,3 +153,14 @@ def test_check_printed_with_a_page_also_finds_the_sentence_there(tmp_path):
     check_printed("within 150 of 1,000 (1,030 ± 21)", 150, 1_000, 1_030.2, 20.8, page=page)   # across a line break
     with pytest.raises(AssertionError, match="is not in"):
         check_printed("within 150 of 1,000 (1,031 ± 21)", 150, 1_000, 1_031, 21, page=page)
+
+
+def test_finished_runs_are_checked_and_a_missing_seed_names_the_command(small):
+    assert pages.finished_runs("small", _results())["wide"].label == "Wide"
+    fewer = _results()
+    fewer["base"] = ex.RunResults(SPECS[0], fewer["base"].seeds[:1], [1])
+    with pytest.raises(ValueError, match=r"results/small lacks seeds \{'base': \[1\]\}: run `python -m rlbook "
+                                         r"experiments run small`"):
+        pages.finished_runs("small", fewer)
+    with pytest.raises(ValueError, match="differ"):                          # and what the registry says holds
+        pages.finished_runs("small", _results(env_id="Pendulum-v1"))
