@@ -4,8 +4,8 @@
     python -m rlbook experiments run dqn-cartpole --jobs 2        # resumable: run it again after Ctrl-C
     python -m rlbook experiments status dqn-cartpole
     python -m rlbook experiments snapshot ddpg-report-humanoid --only large   # logs so far of a seed in training
-    python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir /shared/runs   # on a Ray cluster
-    python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir /shared/runs --detach   # and close the terminal
+    python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir ~/runs   # on a Ray cluster
+    python -m rlbook experiments run td3-sac-1m --ray auto --runs-dir ~/runs --detach   # and close the terminal
     python -m rlbook experiments status td3-sac-1m --ray auto     # and its seeds in flight there
 
 Training one agent, evaluating and rendering it are the library's: ``python -m rlcore train | evaluate | render``.
@@ -147,8 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
                                   "folder); --results and --work default to its results/ and runs/")
     x.add_argument("--results", help="where finished runs' small outputs go (default: ROOT/results)")
     x.add_argument("--work", "--runs-dir", dest="work",
-                   help="where runs train and keep full checkpoints (default: ROOT/runs); with --ray, the same path "
-                        "on every node: on storage every node sees, a seed retried elsewhere resumes there")
+                   help="where runs train and keep full checkpoints (default: ROOT/runs); with --ray, each node "
+                        "trains in this path on its own disk (or its RLBOOK_RUNS_DIR) and, unless every node sees "
+                        "this machine's, sends each checkpoint here, from where a seed goes on on any node")
     x.add_argument("--detach", action="store_true",
                    help="run: start it in the background, in a session of its own, and return at once: closing the "
                         "terminal does not stop it; its output goes to a log in the work folder, whose path is "

@@ -14,21 +14,25 @@ refuses, in one line, where they differ (:func:`check_code`).
 Each missing (experiment, run, seed) becomes one Ray task that asks for one CPU (a DPPO run for one per worker) and
 the memory its replay memory needs (:func:`task_memory`), and runs :func:`rlbook.runner.train_one`, the function
 the local process pool runs, on whichever node Ray picks. It trains in the run folder
-``WORK/<experiment>/<run>/seed-<s>/`` *on that node* and writes its small outputs to a temporary results folder
-there; the task hands those files back, and the submitting machine writes them to its
-``results/``: the same files, with the same provenance, as a local run (``meta.json`` records the command typed on
-the submitting machine, and the node's machine, versions and commit).
+``WORK/<experiment>/<run>/seed-<s>/`` *on that node* (:func:`node_work`) and writes its small outputs to a temporary
+results folder there; the task hands those files back, and the submitting machine writes them to its ``results/``:
+the same files, with the same provenance, as a local run (``meta.json`` records the command typed on the submitting
+machine, and the node's machine, versions and commit).
 
 While the tasks run, each running seed reports its step and latest evaluation to a small actor (:class:`Board`)
 that the submitting machine polls for its progress bars. Ctrl-C there cancels the tasks: each running seed gets a
 KeyboardInterrupt, writes its checkpoint and stops, as under the local pool, and the same command resumes it.
 
 A seed that fails (its own error) is reported as it fails and the others go on; at the end :class:`SeedsFailed`
-lists the failed ones. A task whose worker process or node dies is retried by Ray (:data:`RETRIES` times). With
-``--work`` (alias ``--runs-dir``) on storage every node sees, the retry resumes from the seed's last checkpoint, and
-the submitting machine names its step; otherwise a retry that lands on another node finds no checkpoint and starts
-the seed again, and the submitting machine says so. An address where nothing answers is one line
-(:func:`check_answers`), not Ray's minutes of waiting.
+lists the failed ones. A task whose worker process or node dies is retried by Ray (:data:`RETRIES` times), and
+resumes from the seed's last checkpoint, whose step the submitting machine names. No shared disk is needed for it: a
+node trains in its own folder (``--work``, alias ``--runs-dir``, as a path on that node, or the node's
+:data:`NODE_RUNS`), and where some node does not see the submitting machine's (:func:`keeper_node`), each task sends
+every new checkpoint of its seed, with its logs, back to the submitting machine (:class:`Watcher`,
+:func:`send_folder`), which keeps the latest in its own ``--work`` (:class:`Board`); a task that starts a seed (a
+retry, or the same command again after Ctrl-C), or a run that continues it, on any node first takes that copy where
+it is further on than the node's own (:func:`fetch_folder`). With ``--work`` on storage every node sees, nothing is
+sent. An address where nothing answers is one line (:func:`check_answers`), not Ray's minutes of waiting.
 
 ``experiments status NAME --ray ADDRESS`` reads the same boards (:func:`in_flight_lines`): each seed in flight,
 its machine and node, its step and its last checkpoint's step, which the task reads from the checkpoint when it
@@ -304,9 +308,10 @@ def source_results(spec: RunSpec, seed: int, results: Path, work: Path) -> dict[
 def on_node(fn, exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], work: str, command: str | None,
             source: dict[str, bytes] | None = None, **kwargs: Any) -> tuple[str, dict[str, bytes], str]:
     """Run ``fn`` (:func:`~rlbook.runner.train_one` or :func:`~rlbook.runner.snapshot_one`) for one seed on this
-    node, with a temporary results folder that starts as the submitting machine's (``current``, and ``source``, the
-    results of the seed it continues, :func:`source_results`): returns its status line, the folder's files
-    afterwards, and the folder's path (which the line names)."""
+    node, in its work folder (:func:`node_work`), with a temporary results folder that starts as the submitting
+    machine's (``current``, and ``source``, the results of the seed it continues, :func:`source_results`): returns
+    its status line, the folder's files afterwards, and the folder's path (which the line names)."""
+    work = str(node_work(work))
     with tempfile.TemporaryDirectory(prefix="rlbook-results-") as tmp, command_typed(command):
         _, result_dir = run_paths(exp, spec.name, seed, tmp, work)
         unpack(current, result_dir)
@@ -314,6 +319,78 @@ def on_node(fn, exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], w
             unpack(source, run_paths(*spec.continues.split("/"), seed, tmp, work)[1])
         line = fn(exp, spec, seed, Path(tmp), Path(work), **kwargs)
         return line, pack(result_dir), str(result_dir)
+
+
+# --- checkpoints kept by the submitting machine ----------------------------------------------------------------
+
+NODE_RUNS = "RLBOOK_RUNS_DIR"
+"""Set for a node's Ray processes (``RLBOOK_RUNS_DIR=/scratch/runs ray start --address ...``): the folder where that
+node trains its seeds, instead of the path the submitting machine gives as ``--runs-dir``."""
+CHUNK_BYTES = 64 * 2**20
+"""A checkpoint travels between a node and the submitting machine in pieces of this size, so that neither side holds
+a second copy of a replay memory of gigabytes."""
+
+
+def node_work(work: str | os.PathLike) -> Path:
+    """Where this node trains: :data:`NODE_RUNS` where its Ray processes were started with it, else ``work``, the
+    submitting machine's ``--runs-dir``."""
+    return Path(os.environ.get(NODE_RUNS) or work)
+
+
+def small_files(folder: Path) -> dict[str, bytes]:
+    """A seed's run folder as it stands, but its checkpoint: every file but the temporary ones of a save in progress
+    (``.name``), each CSV log up to its last whole line (a row being written is left for the next copy)."""
+    files = {}
+    for path in sorted(folder.iterdir()) if folder.is_dir() else []:
+        if path.is_file() and not path.name.startswith(".") and path.name != "checkpoint.pt":
+            data = path.read_bytes()
+            files[path.name] = data[:data.rfind(b"\n") + 1] if path.suffix == ".csv" else data
+    return files
+
+
+def chunks(path: Path):
+    """The file ``path`` in pieces of :data:`CHUNK_BYTES`, read from one open file (a save that replaces it meanwhile
+    does not mix two checkpoints)."""
+    with open(path, "rb") as f:
+        while piece := f.read(CHUNK_BYTES):
+            yield piece
+
+
+def send_folder(board, key: str, folder: Path) -> None:
+    """Send the seed ``key``'s run folder ``folder`` (its checkpoint, logs and records) to the submitting machine
+    through ``board`` (:meth:`Board.receive`, :meth:`Board.keep`), which replaces its copy once all has arrived."""
+    import ray
+
+    logs = small_files(folder)  # the logs first: they reach at least as far as the checkpoint read after them
+    offset = 0
+    for piece in chunks(folder / "checkpoint.pt"):
+        ray.get(board.receive.remote(key, offset, piece))
+        offset += len(piece)
+    ray.get(board.keep.remote(key, logs))
+
+
+def fetch_folder(board, key: str, folder: Path) -> int | None:
+    """Make ``folder`` the submitting machine's copy of the seed ``key``'s run folder (:meth:`Board.kept`) where that
+    copy's checkpoint is later than the one ``folder`` holds (or ``folder`` has none); returns the step of the
+    checkpoint ``folder`` then holds (None: none)."""
+    import ray
+
+    here = checkpoint_step(folder / "checkpoint.pt")
+    kept = ray.get(board.kept.remote(key))
+    if kept is None or (here is not None and kept["step"] <= here):
+        return here
+    folder.mkdir(parents=True, exist_ok=True)
+    for old in folder.iterdir():
+        if old.is_file():
+            old.unlink()
+    tmp = folder / ".checkpoint.pt.fetching"
+    with open(tmp, "wb") as f:
+        for offset in range(0, kept["size"], CHUNK_BYTES):
+            f.write(ray.get(board.piece.remote(key, offset)))
+    for name, data in kept["files"].items():
+        (folder / name).write_bytes(data)
+    os.replace(tmp, folder / "checkpoint.pt")
+    return kept["step"]
 
 
 # --- the tasks ---------------------------------------------------------------------------------------------------
@@ -345,47 +422,78 @@ def checkpoint_step(path: Path) -> int | None:
         return None
 
 
-def watch(work_dir: Path, key: str, board, stop: threading.Event) -> None:
-    """Report the seed's step (``progress.csv``), latest evaluation (``eval.csv``) and the step of its last
-    checkpoint (read again when the file changes) to ``board`` when they change, every :data:`POLL_SECONDS`, until
-    ``stop`` is set."""
-    seen, written, saved = None, None, None
-    while not stop.wait(POLL_SECONDS):
+class Watcher:
+    """On a node, beside a training seed: reports its step (``progress.csv``), latest evaluation (``eval.csv``) and
+    the step of its last checkpoint (read again when the file changes) to the ``board`` when they change; with
+    ``keep``, sends each new checkpoint, with the seed's logs, to the submitting machine (:meth:`Board.keep`), which
+    keeps the latest one."""
+
+    def __init__(self, work_dir: Path, key: str, board, keep: bool):
+        self.work_dir, self.key, self.board, self.keep = work_dir, key, board, keep
+        self.seen: tuple | None = None
+        self.written: int | None = None
+        self.saved: int | None = None
+        self.sent: int | None = None
+
+    def poll(self) -> None:
+        """One look at the run folder: report what changed; send a checkpoint not sent yet."""
         with contextlib.suppress(OSError):
-            if (stamp := (work_dir / "checkpoint.pt").stat().st_mtime_ns) != written:
-                written, saved = stamp, checkpoint_step(work_dir / "checkpoint.pt")
-        now = (last_value(work_dir / "progress.csv", "step"), last_value(work_dir / "eval.csv", "mean_return"), saved)
-        if now != seen:
-            board.report.remote(key, *now)
-            seen = now
+            if (stamp := (self.work_dir / "checkpoint.pt").stat().st_mtime_ns) != self.written:
+                self.written, self.saved = stamp, checkpoint_step(self.work_dir / "checkpoint.pt")
+        now = (last_value(self.work_dir / "progress.csv", "step"),
+               last_value(self.work_dir / "eval.csv", "mean_return"), self.saved)
+        if now != self.seen:
+            self.board.report.remote(self.key, *now)
+            self.seen = now
+        if self.keep and self.saved is not None and self.written != self.sent:
+            send_folder(self.board, self.key, self.work_dir)
+            self.sent = self.written
+
+    def run(self, stop: threading.Event) -> None:
+        """:meth:`poll` every :data:`POLL_SECONDS` until ``stop`` is set."""
+        while not stop.wait(POLL_SECONDS):
+            self.poll()
 
 
 def train_task(exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], work: str, command: str | None,
-               board, source: dict[str, bytes] | None = None,
-               code: dict[str, str | None] | None = None) -> tuple[str, dict[str, bytes], str]:
+               board, source: dict[str, bytes] | None = None, code: dict[str, str | None] | None = None,
+               keeper: str | None = None) -> tuple[str, dict[str, bytes], str]:
     """One seed, on a Ray worker: :func:`~rlbook.runner.train_one` (:func:`on_node`), its progress on ``board``;
     ``source``: the results of the seed it continues; ``code``: the submitting machine's (:func:`driver_code`),
-    which this process must run (:func:`check_code`), else it refuses before training."""
+    which this process must run (:func:`check_code`), else it refuses before training. ``keeper``: the submitting
+    machine's node, where the nodes do not all see ``work``: unless this task trains in that very folder, it first
+    takes the submitting machine's copy of the seed's run folder where that is further on (and of the seed it
+    continues, :func:`fetch_folder`), and sends each new checkpoint there as it is written (:class:`Watcher`), the
+    last one too (a finished seed's, which a run that continues it starts from; or the one a stop writes)."""
     import ray
 
     if code is not None:
         check_code(code)
-    work_dir, _ = run_paths(exp, spec.name, seed, tempfile.gettempdir(), work)
-    key = seed_key(exp, spec.name, seed)
-    resumable = checkpoint_step(work_dir / "checkpoint.pt")
-    node = ray.get_runtime_context().get_node_id()
+    key, node, here = seed_key(exp, spec.name, seed), ray.get_runtime_context().get_node_id(), node_work(work)
+    keep = keeper is not None and not (node == keeper and here.resolve() == Path(work).resolve())
+    work_dir, _ = run_paths(exp, spec.name, seed, tempfile.gettempdir(), here)
+    if keep and spec.continues:
+        source_exp, source_run = spec.continues.split("/")
+        fetch_folder(board, seed_key(source_exp, source_run, seed),
+                     run_paths(source_exp, source_run, seed, tempfile.gettempdir(), here)[0])
+    resumable = fetch_folder(board, key, work_dir) if keep else checkpoint_step(work_dir / "checkpoint.pt")
     note = ray.get(board.attempt.remote(key, node, os.getpid(), resumable, socket.gethostname(),
                                         str(checkout_root())))
     if note:
         print(note, file=sys.stderr, flush=True)
-    stop = threading.Event()
-    watcher = threading.Thread(target=watch, args=(work_dir, key, board, stop), daemon=True)
-    watcher.start()
+    stop, watcher = threading.Event(), Watcher(work_dir, key, board, keep)
+    thread = threading.Thread(target=watcher.run, args=(stop,), daemon=True)
+    thread.start()
     try:
         return on_node(train_one, exp, spec, seed, current, work, command, source)
-    finally:
+    finally:  # finished, stopped (Ctrl-C there) or failed: its last checkpoint goes to the submitting machine too
         stop.set()
-        watcher.join()
+        thread.join()
+        try:
+            watcher.poll()
+        except Exception as exc:  # the checkpoint stays on this node; a seed's own error is the one to raise
+            print(f"{key}: its last checkpoint could not be sent to the submitting machine ({one_line(exc)})",
+                  file=sys.stderr, flush=True)
 
 
 def snapshot_task(exp: str, spec: RunSpec, seed: int, current: dict[str, bytes], work: str, command: str | None,
@@ -396,10 +504,14 @@ def snapshot_task(exp: str, spec: RunSpec, seed: int, current: dict[str, bytes],
 
 class Board:
     """Where each seed of one ``experiments run --ray`` trains and how far it is: the tasks report, the submitting
-    machine (and ``experiments snapshot --ray``) read. A Ray actor with no CPU of its own."""
+    machine (and ``experiments snapshot --ray``) read. A Ray actor with no CPU of its own, on the submitting
+    machine's node. With ``work`` (the submitting machine's ``--runs-dir``, where the nodes do not all see it), it
+    also keeps each seed's latest checkpoint there, as the tasks send it (:func:`send_folder`), and hands it to the
+    task that goes on with the seed, on any node (:func:`fetch_folder`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, work: str | None = None) -> None:
         self.seeds: dict[str, dict[str, Any]] = {}
+        self.work = work
 
     def attempt(self, key: str, node: str, pid: int, resumable: float | None, host: str | None = None,
                 code: str | None = None) -> str | None:
@@ -412,15 +524,56 @@ class Board:
             died = seed["attempts"][-1]
             reached = f"step {int(seed['step']):,}" if seed["step"] is not None else "its start"
             how = (f"resuming from its checkpoint at step {int(resumable):,}" if resumable is not None else
-                   "restarting from step 0: no checkpoint in its run folder there" +
-                   (f" (the last one is on node {died['node'][:8]}; give --runs-dir on storage every node sees "
-                    "to resume instead)" if died["node"] != node else ""))
+                   "restarting from step 0: it had written no checkpoint")
             note = (f"{key}: its worker (pid {died['pid']}, node {died['node'][:8]}) died at {reached}; "
                     f"retried on node {node[:8]}, {how}")
             seed["notes"].append(note)
         seed["attempts"].append({"node": node, "pid": pid, "host": host, "code": code})
         seed.update(checkpoint=resumable, running=True)
         return note
+
+    def _folder(self, key: str) -> Path:
+        return Path(self.work) / key
+
+    def receive(self, key: str, offset: int, piece: bytes) -> None:
+        """A piece of the seed ``key``'s new checkpoint, at byte ``offset`` (0: a new one begins)."""
+        incoming = self._folder(key) / ".checkpoint.pt.incoming"
+        incoming.parent.mkdir(parents=True, exist_ok=True)
+        with open(incoming, "wb" if offset == 0 else "r+b") as f:
+            f.seek(offset)
+            f.write(piece)
+
+    def keep(self, key: str, files: dict[str, bytes]) -> None:
+        """The seed ``key``'s new checkpoint has all arrived (:meth:`receive`), with the folder's other ``files``:
+        make them this machine's copy of its run folder, the checkpoint last (a copy read meanwhile is whole)."""
+        folder = self._folder(key)
+        for name, data in files.items():
+            tmp = folder / f".{name}.tmp"
+            tmp.write_bytes(data)
+            os.replace(tmp, folder / name)
+        incoming = folder / ".checkpoint.pt.incoming"
+        size = incoming.stat().st_size
+        os.replace(incoming, folder / "checkpoint.pt")
+        seed = self.seeds.setdefault(key, {"attempts": [], "step": None, "eval": None, "notes": []})
+        seed["kept"] = seed.get("kept", 0) + 1
+        seed["kept_bytes"] = seed.get("kept_bytes", 0) + size + sum(map(len, files.values()))
+
+    def kept(self, key: str) -> dict[str, Any] | None:
+        """This machine's copy of the seed ``key``'s run folder: its checkpoint's ``step`` and ``size`` and the other
+        ``files``; None without a checkpoint (or without keeping)."""
+        if self.work is None:
+            return None
+        folder = self._folder(key)
+        step = checkpoint_step(folder / "checkpoint.pt")
+        if step is None:
+            return None
+        return {"step": step, "size": (folder / "checkpoint.pt").stat().st_size, "files": small_files(folder)}
+
+    def piece(self, key: str, offset: int) -> bytes:
+        """:data:`CHUNK_BYTES` of the seed ``key``'s kept checkpoint from byte ``offset``."""
+        with open(self._folder(key) / "checkpoint.pt", "rb") as f:
+            f.seek(offset)
+            return f.read(CHUNK_BYTES)
 
     def report(self, key: str, step: float | None, evaluation: float | None, checkpoint: float | None = None) -> None:
         """The seed ``key`` has logged step ``step``, its latest evaluation is ``evaluation`` and its last checkpoint
@@ -478,11 +631,16 @@ class SeedBars:
         self.total.close()
 
 
-def new_board(ray, env: dict[str, Any] | None = None):
-    """A :class:`Board` actor for one submission, named so that another driver finds it, alive while this one is;
-    ``env``: its ``runtime_env`` (:func:`shipped_env`)."""
-    return ray.remote(num_cpus=0)(Board).options(name=f"{BOARD_PREFIX}{uuid.uuid4().hex[:12]}",
-                                                 namespace=NAMESPACE, runtime_env=env).remote()
+def new_board(ray, env: dict[str, Any] | None = None, work: Path | None = None):
+    """A :class:`Board` actor for one submission on this machine's node, named so that another driver finds it, alive
+    while this one is; ``env``: its ``runtime_env`` (:func:`shipped_env`); ``work``: the folder where it keeps the
+    seeds' checkpoints (None: it keeps none)."""
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
+    return ray.remote(num_cpus=0)(Board).options(name=f"{BOARD_PREFIX}{uuid.uuid4().hex[:12]}", namespace=NAMESPACE,
+                                                 runtime_env=env, scheduling_strategy=here).remote(
+        None if work is None else str(work))
 
 
 def ray_backend(address: str) -> Callable[..., list[str]]:
@@ -506,16 +664,17 @@ def ray_snapshots(address: str) -> Callable[..., list[str]]:
     return take
 
 
-def sees(marker: str, token: str) -> bool:
-    """On a node: whether the file ``marker`` there holds ``token`` (the one the submitting machine wrote)."""
+def sees(work: str, name: str, token: str) -> bool:
+    """On a node: whether the file ``name`` in the folder where it trains (:func:`node_work` of ``work``) holds
+    ``token`` (the one the submitting machine wrote)."""
     try:
-        return Path(marker).read_text() == token
+        return (node_work(work) / name).read_text() == token
     except OSError:
         return False
 
 
 def nodes_not_seeing(ray, work: Path, token: str | None = None) -> list[str]:
-    """The live nodes (``host (node id)``) that do not see the work folder ``work`` as this machine does: each is
+    """The live nodes (``host (node id)``) that do not train in the work folder ``work`` this machine sees: each is
     asked, by a task of no CPU pinned to it, for a file that this machine writes there (holding ``token``)."""
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
@@ -526,22 +685,23 @@ def nodes_not_seeing(ray, work: Path, token: str | None = None) -> list[str]:
         nodes = [node for node in ray.nodes() if node.get("Alive")]
         remote = ray.remote(num_cpus=0)(sees)
         seen = ray.get([remote.options(scheduling_strategy=NodeAffinitySchedulingStrategy(node["NodeID"], soft=False))
-                        .remote(str(marker), token or written) for node in nodes])
+                        .remote(str(work), marker.name, token or written) for node in nodes])
     finally:
         marker.unlink(missing_ok=True)
     return [f"{node.get('NodeManagerHostname', '?')} ({node['NodeID'][:8]})" for node, ok in zip(nodes, seen) if not ok]
 
 
-def check_shared(ray, work: Path) -> None:
-    """On a cluster of several nodes, a one-line ValueError unless every node sees the work folder ``work`` (where
-    the seeds' checkpoints are): else a retried seed, or a re-run after Ctrl-C, that lands on another node would
-    start from step 0. One node: nothing to share."""
-    if sum(1 for node in ray.nodes() if node.get("Alive")) < 2:
-        return
-    if unseen := nodes_not_seeing(ray, work):
-        raise ValueError(f"--runs-dir {work} is not seen by every node of the cluster (not by {', '.join(unseen)}): "
-                         "on several machines give --runs-dir on storage every machine mounts at the same path (NFS, "
-                         "say), so that a seed retried or run again on another machine resumes from its checkpoint")
+def keeper_node(ray, work: Path) -> str | None:
+    """This machine's node, where the checkpoints must be kept here (:class:`Board`): on a cluster of several nodes
+    some of which do not see the work folder ``work`` as this machine does, so that a retried seed, or one run again
+    after Ctrl-C, that lands on another node resumes from its last checkpoint instead of step 0; says so in one line.
+    None on one node, or where every node sees ``work`` (storage they all mount): nothing to send."""
+    if sum(1 for node in ray.nodes() if node.get("Alive")) < 2 or not (unseen := nodes_not_seeing(ray, work)):
+        return None
+    print(f"--runs-dir {work} is not this machine's folder on {', '.join(unseen)}: each seed's checkpoints come back "
+          f"here as they are written, kept in {work}, and a seed that goes on elsewhere resumes from them",
+          file=sys.stderr, flush=True)
+    return ray.get_runtime_context().get_node_id()
 
 
 class SeedsFailed(Exception):
@@ -573,14 +733,15 @@ def run_on_ray(name: str, tasks: list[tuple[RunSpec, int]], results: Path, work:
              if (folder / "policy.pt").exists()]
     tasks = [(spec, s) for spec, s in tasks if not (folders[spec.name, s] / "policy.pt").exists()]
     reserved = check_memory(ray, name, tasks)
-    check_shared(ray, work)
-    board, command, refs = new_board(ray, env), command_line(), {}
+    keeper = keeper_node(ray, work)
+    board, command, refs = new_board(ray, env, work if keeper else None), command_line(), {}
     remote = ray.remote(train_task)
     for spec, s in tasks:
         result_dir = folders[spec.name, s]
         ref = remote.options(num_cpus=spec.workers, memory=reserved[spec.name], max_retries=RETRIES,
                              retry_exceptions=False, name=seed_key(name, spec.name, s), runtime_env=env).remote(
-            name, spec, s, pack(result_dir), str(work), command, board, source_results(spec, s, results, work), code)
+            name, spec, s, pack(result_dir), str(work), command, board, source_results(spec, s, results, work), code,
+            keeper)
         refs[ref] = (seed_key(name, spec.name, s), spec.steps, result_dir)
     done, failures = collect(ray, refs, board, name, progress)
     if failures:
@@ -661,6 +822,8 @@ def collect(ray, refs: dict, board, desc: str, progress: bool) -> tuple[list[str
             for ref in done:
                 key, _, result_dir = refs[ref]
                 notes = "".join(f" ({n.split(': ', 1)[1]})" for n in state.get(key, {}).get("notes", []))
+                if kept := state.get(key, {}).get("kept"):
+                    notes += f" ({kept} checkpoint(s), {state[key]['kept_bytes'] / 2**20:,.1f} MiB, kept here)"
                 try:
                     line = finished(ray, ref, result_dir)
                 except Exception as exc:  # this seed's own error, or its worker died once too often

@@ -93,8 +93,8 @@ def start_from(spec: RunSpec, seed: int, work_dir: Path, results: Path, work: Pa
                          f"it first with `python -m rlbook experiments run {exp} --only {run} --seeds {seed}`")
     if not (source_work / "checkpoint.pt").exists():
         raise ValueError(f"{spec.name} seed {seed} continues {exp}/{run} seed {seed}, which is finished but whose "
-                         f"checkpoint is not in {source_work} (on a cluster: give --runs-dir on storage every node "
-                         "sees)")
+                         f"checkpoint is not in {source_work} (on a cluster: nor in the submitting machine's "
+                         "--runs-dir, which keeps a finished seed's last checkpoint)")
     if source.overrides != spec.overrides or source.algo != spec.algo or source.env_id != spec.env_id:
         raise ValueError(f"{spec.name} continues {exp}/{run} with other settings; a continued run keeps them all")
     work_dir.mkdir(parents=True, exist_ok=True)

@@ -372,8 +372,7 @@ def test_the_board_says_how_a_retried_seed_goes_on():
     board.report("e/r/seed-0", 1_500.0, -3.5)
     note = board.attempt("e/r/seed-0", "b" * 20, 12, None)
     assert note == ("e/r/seed-0: its worker (pid 11, node aaaaaaaa) died at step 1,500; retried on node bbbbbbbb, "
-                    "restarting from step 0: no checkpoint in its run folder there (the last one is on node "
-                    "aaaaaaaa; give --runs-dir on storage every node sees to resume instead)")
+                    "restarting from step 0: it had written no checkpoint")
     board.report("e/r/seed-0", 2_000.0, None)
     assert board.attempt("e/r/seed-0", "b" * 20, 13, 1_750).endswith(
         "died at step 2,000; retried on node bbbbbbbb, resuming from its checkpoint at step 1,750")
@@ -453,7 +452,7 @@ def test_the_checkout_is_shipped_without_its_heavy_folders(cluster, tmp_path, mo
 def test_a_work_folder_some_node_does_not_see_is_found(cluster, tmp_path):
     import ray
 
-    # the check that refuses a cluster of several machines without a shared --runs-dir: each node reads a file this
+    # the check that decides whether checkpoints must come back to the submitting machine: each node reads a file this
     # machine wrote there; this cluster's one node sees it, and does not where it holds other content
     assert nodes_not_seeing(ray, tmp_path / "runs") == []
     node = ray.get_runtime_context().get_node_id()
