@@ -72,15 +72,18 @@ def pinned_environment():
 
 
 class Nodes:
-    """The cluster: its address, and for each of the nodes ``"a"`` and ``"b"`` its node id and work folder."""
+    """The cluster (``cluster``), and for each of the nodes ``"a"`` and ``"b"`` its node and work folder; the nodes'
+    object stores of ``object_store_mib`` (default: Ray's for a test cluster, 150 MiB). Also
+    ``benchmarks/ray_keeping.py``'s cluster."""
 
-    def __init__(self, top: Path):
+    def __init__(self, top: Path, object_store_mib: int | None = None):
         from ray.cluster_utils import Cluster
 
         self.top, self.cluster, self.nodes = top, Cluster(), {}
+        self.store = {} if object_store_mib is None else {"object_store_memory": object_store_mib * 2**20}
         # the submitting machine: no CPU, so that every seed trains on A or B; the driver joins it (Ray prefers the
         # head among the nodes of one host)
-        self.cluster.add_node(num_cpus=0, temp_dir=str(top / "tmp-head"))
+        self.cluster.add_node(num_cpus=0, temp_dir=str(top / "tmp-head"), **self.store)
         for name in ("a", "b"):
             self.add(name)
 
@@ -88,7 +91,7 @@ class Nodes:
         """Start node ``name`` (again): one CPU, its own temporary folder and work folder."""
         work = self.top / f"runs-{name}"
         node = self.cluster.add_node(num_cpus=1, temp_dir=str(self.top / f"tmp-{name}"),
-                                     env_vars={NODE_RUNS: str(work), **PINNED})
+                                     env_vars={NODE_RUNS: str(work), **PINNED}, **self.store)
         self.nodes[name] = (node, work)
 
     def work(self, name: str) -> Path:
