@@ -25,7 +25,7 @@ import rlbook as ex
 from portable import skip_or_fail
 from rlbook.cluster import (BOARD_PREFIX, INSTALL, NAMESPACE, NODE_RUNS, driver_code, in_flight_lines, ray_backend,
                             shipped_env)
-from test_cluster import PINNED, UNSET, board_state, same, wait_for
+from test_cluster import PINNED, board_state, pinned_environment, same, wait_for  # noqa: F401 (a fixture)
 
 HERE = Path(__file__).parent
 LONG = {"learning_starts": 100, "train_freq": 4, "gradient_steps": 1, "eval_every": 1_000, "hidden": [16],
@@ -47,28 +47,15 @@ def register() -> None:
     ex.EXPERIMENTS[NODES.name] = lambda: NODES
 
 
+# pinned_environment (autouse, imported): test_cluster.PINNED set and test_cluster.UNSET unset for these tests too;
+# the nodes' processes get PINNED from their start (Nodes.add)
+
+
 def driver_main(argv: list[str]) -> int:  # a submitting process, run by a test below: `python -m rlbook ...`
     from rlbook.__main__ import main
 
     register()
     return main(argv)
-
-
-@pytest.fixture(scope="module", autouse=True)
-def pinned_environment():
-    """:data:`test_cluster.PINNED` set and :data:`test_cluster.UNSET` unset here and in the nodes' processes."""
-    from rlcore import provenance
-
-    with pytest.MonkeyPatch.context() as mp:
-        for name, value in PINNED.items():
-            mp.setenv(name, value)
-        for name in UNSET:
-            mp.delenv(name, raising=False)
-        provenance.loaded_commit.cache_clear()
-        provenance.loaded_changes.cache_clear()
-        yield
-    provenance.loaded_commit.cache_clear()
-    provenance.loaded_changes.cache_clear()
 
 
 class Nodes:
