@@ -518,7 +518,7 @@ class Board:
         """A task starts ``key`` on ``node`` (machine ``host``) in process ``pid``, running the code in folder
         ``code``, with a checkpoint written at step ``resumable`` (None: no checkpoint there). Returns what to say if
         this is a retry."""
-        seed = self.seeds.setdefault(key, {"attempts": [], "step": None, "eval": None, "notes": []})
+        seed = self._seed(key)
         note = None
         if seed["attempts"]:
             died = seed["attempts"][-1]
@@ -531,6 +531,10 @@ class Board:
         seed["attempts"].append({"node": node, "pid": pid, "host": host, "code": code})
         seed.update(checkpoint=resumable, running=True)
         return note
+
+    def _seed(self, key: str) -> dict[str, Any]:
+        """The seed ``key``'s entry, made empty where it has none yet."""
+        return self.seeds.setdefault(key, {"attempts": [], "step": None, "eval": None, "notes": []})
 
     def _folder(self, key: str) -> Path:
         return Path(self.work) / key
@@ -554,7 +558,7 @@ class Board:
         incoming = folder / ".checkpoint.pt.incoming"
         size = incoming.stat().st_size
         os.replace(incoming, folder / "checkpoint.pt")
-        seed = self.seeds.setdefault(key, {"attempts": [], "step": None, "eval": None, "notes": []})
+        seed = self._seed(key)
         seed["kept"] = seed.get("kept", 0) + 1
         seed["kept_bytes"] = seed.get("kept_bytes", 0) + size + sum(map(len, files.values()))
 
