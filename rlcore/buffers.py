@@ -136,14 +136,23 @@ class SumTree:
             raise ValueError("priorities must be finite and non-negative")
         if np.any((idx < 0) | (idx >= self.capacity)):
             raise IndexError(f"leaf index out of range [0, {self.capacity})")
+        if idx.size == 1:  # one leaf (each new transition): its path alone, without array bookkeeping
+            tree, node = self.tree, int(idx[0]) + self.leaves
+            tree[node] = priority[0]
+            node //= 2
+            while node >= 1:
+                tree[node] = tree[2 * node] + tree[2 * node + 1]
+                node //= 2
+            return
         nodes = idx + self.leaves
         self.tree[nodes] = priority
-        nodes = np.unique(nodes // 2)
+        nodes = np.unique(nodes // 2)  # sorted, and halving keeps them sorted: a repeat is next to its twin
         while nodes[0] >= 1:
             self.tree[nodes] = self.tree[2 * nodes] + self.tree[2 * nodes + 1]
             if nodes[0] == 1:
                 break
-            nodes = np.unique(nodes // 2)
+            nodes = nodes // 2
+            nodes = nodes[np.concatenate(([True], nodes[1:] != nodes[:-1]))]
 
     def find(self, mass) -> np.ndarray:
         """Leaf indices where the prefix sum of priorities first exceeds ``mass`` (vectorized)."""

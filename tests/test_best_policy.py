@@ -2,12 +2,11 @@
 best_model; evaluate and render take either."""
 
 import json
-import subprocess
-import sys
 
 import pytest
 import torch
 
+from commandline import command
 from rlcore import dqn
 from rlcore.checkpoint import load_checkpoint
 
@@ -61,8 +60,7 @@ def test_evaluate_takes_the_last_or_the_best_policy(tmp_path, scripted_evaluatio
     dqn.train("CartPole-v1", dqn.Config(**CONFIG), steps=400, seed=0, out=tmp_path / "run")
 
     def evaluate(folder, *which):
-        return subprocess.run([sys.executable, "-m", "rlcore", "evaluate", str(folder), "--episodes", "1", *which],
-                              capture_output=True, text=True, timeout=120)
+        return command("rlcore", "evaluate", folder, "--episodes", "1", *which, check=False)
 
     last, best = (json.loads(evaluate(tmp_path / "run", *w).stdout.splitlines()[-1]) for w in ((), ("--which", "best")))
     assert (last["policy"], last["train_steps"]) == ("last", 400) and "training_evaluation" not in last

@@ -38,15 +38,15 @@ def test_sum_tree_total_equals_sum_of_leaves_after_any_updates(capacity):
     tree = SumTree(capacity)
     leaves = np.zeros(capacity)
     for _ in range(300):
-        idx = rng.integers(0, capacity, size=rng.integers(1, 4))
+        idx = rng.integers(0, capacity, size=rng.integers(1, 4))  # one leaf (its own path) or a few
         p = rng.random(len(idx)) * 10
         tree.update(idx, p)
         leaves[idx] = p  # with repeated indices the last write wins, as in the tree
         assert tree.total == pytest.approx(leaves.sum())
         np.testing.assert_allclose(tree[np.arange(capacity)], leaves)
-        # every inner node is the sum of its two children
+        # every inner node is exactly the sum of its two children
         inner = np.arange(1, tree.leaves)
-        np.testing.assert_allclose(tree.tree[inner], tree.tree[2 * inner] + tree.tree[2 * inner + 1])
+        np.testing.assert_array_equal(tree.tree[inner], tree.tree[2 * inner] + tree.tree[2 * inner + 1])
 
 
 def test_sum_tree_find_by_hand():

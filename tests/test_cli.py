@@ -1,4 +1,6 @@
-"""The command line, driven the way a user (or another tool) drives it: as a subprocess."""
+"""The command line, driven the way a user (or another tool) drives it. The run the module shares is trained by a
+real ``python -m rlcore`` process, and the interrupts are signals to one; the other commands call the same ``main``
+in this process (tests/commandline.py says why)."""
 
 import json
 import signal
@@ -8,22 +10,19 @@ import time
 
 import pytest
 
+from commandline import command
 from rlcore.checkpoint import load_checkpoint
 
 
-def rlcore(*args, check=True):
-    proc = subprocess.run([sys.executable, "-m", "rlcore", *map(str, args)], capture_output=True, text=True,
-                          timeout=300)
-    if check and proc.returncode != 0:
-        raise AssertionError(f"rlcore {' '.join(map(str, args))} failed ({proc.returncode}):\n{proc.stderr}")
-    return proc
+def rlcore(*args, check=True, process=False):
+    return command("rlcore", *args, check=check, process=process)
 
 
 @pytest.fixture(scope="module")
 def frozenlake_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs") / "fl"
     rlcore("train", "q-learning", "--env", "FrozenLake-v1", "--steps", 15000, "--seed", 0, "--out", out,
-           "--env-kwargs", '{"is_slippery": false}', "--no-progress")
+           "--env-kwargs", '{"is_slippery": false}', "--no-progress", process=True)
     return out
 
 
@@ -37,7 +36,7 @@ def test_train_writes_the_run_folder(frozenlake_run):
 
 
 def test_evaluate_prints_json_last(frozenlake_run):
-    out = rlcore("evaluate", frozenlake_run, "--episodes", 4).stdout
+    out = rlcore("evaluate", frozenlake_run, "--episodes", 4, process=True).stdout
     result = json.loads(out.strip().splitlines()[-1])
     assert result["episodes"] == 4
     assert result["mean_return"] == 1.0 and result["std_return"] == 0.0
@@ -46,7 +45,7 @@ def test_evaluate_prints_json_last(frozenlake_run):
 
 def test_render_writes_a_gif(frozenlake_run, tmp_path):
     gif = tmp_path / "fl.gif"
-    rlcore("render", frozenlake_run, "--out", gif, "--frames", 8)
+    rlcore("render", frozenlake_run, "--out", gif, "--frames", 8, process=True)
     assert gif.read_bytes()[:6] == b"GIF89a"
 
 

@@ -1,10 +1,10 @@
 """TD3, SAC and CrossQ through the command line: train, evaluate, the logs each writes, and bad settings refused in one line."""
 
 import json
-import subprocess
-import sys
 
 import pytest
+
+from commandline import command
 
 REFUSALS = {
     "td3": ((("--env", "CartPole-v1"), "TD3 needs a continuous (Box) action space"),
@@ -21,8 +21,7 @@ LOGS = {"td3": ("progress.csv", "eval.csv"), "sac": ("progress.csv", "eval.csv",
 
 
 def rlcore(*args):
-    return subprocess.run([sys.executable, "-m", "rlcore", *map(str, args)], capture_output=True, text=True,
-                          timeout=300)
+    return command("rlcore", *args, check=False)  # in this process: tests/commandline.py
 
 
 @pytest.mark.parametrize("algo", ["td3", "sac", "crossq"])

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import pytest
 
+from commandline import command
 from rlcore import machine, provenance, runs
 
 
@@ -198,10 +199,10 @@ def test_the_thread_count_is_set_and_recorded_in_the_metadata(monkeypatch):
         torch.set_num_threads(before)
 
 
-def test_the_cli_refuses_a_bad_thread_count_without_a_traceback(tmp_path):
-    env = {**os.environ, "RLCORE_TORCH_THREADS": "many"}
-    proc = subprocess.run([sys.executable, "-m", "rlcore", "train", "ddpg", "--env", "Pendulum-v1", "--steps", "10",
-                           "--out", str(tmp_path / "run")], capture_output=True, text=True, env=env)
+def test_the_cli_refuses_a_bad_thread_count_without_a_traceback(tmp_path, monkeypatch):
+    monkeypatch.setenv("RLCORE_TORCH_THREADS", "many")
+    proc = command("rlcore", "train", "ddpg", "--env", "Pendulum-v1", "--steps", "10", "--out", tmp_path / "run",
+                   check=False)
     assert proc.returncode != 0
     assert "Traceback" not in proc.stderr
     assert proc.stderr.strip().splitlines() == ["error: RLCORE_TORCH_THREADS='many': give a whole number of threads, 1 "

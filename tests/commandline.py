@@ -1,0 +1,84 @@
+"""The command lines, run the way the tests need them.
+
+``python -m rlcore ...`` and ``python -m rlbook ...`` are ``sys.exit(main(argv))``. A test that is about what a
+command does (its files, its JSON, its refusals, its exit status) calls that same ``main`` here, in the test's
+process, with the same ``sys.argv`` the command would see, and its output captured; a new interpreter would add
+about two seconds of start-up (importing torch and, at the first optimizer, torch._dynamo) to every call and test
+nothing more. A test that is about the process itself (the ``python -m`` entry, signals, a command's recorded
+command line) starts one with ``process=True``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import signal
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass
+class Result:
+    """What a finished command left: as :class:`subprocess.CompletedProcess` names it."""
+
+    args: list[str]
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def _main(package: str):
+    if package == "rlcore":
+        from rlcore.__main__ import main
+    elif package == "rlbook":
+        from rlbook.__main__ import main
+    else:
+        raise ValueError(f"no command line {package!r}")
+    return main
+
+
+def run_main(package: str, *args: object) -> Result:
+    """``python -m <package> *args`` without a new interpreter: its ``main`` in this process, ``sys.argv`` as
+    ``python -m`` sets it, stdout and stderr captured; the signal handlers and torch's thread count a command sets
+    are put back after it."""
+    import torch
+
+    argv = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    threads, saved_argv = torch.get_num_threads(), sys.argv
+    sys.argv = [str(ROOT / package / "__main__.py"), *argv]
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = _main(package)(argv)
+            except SystemExit as exc:  # argparse's refusals and --help exit
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+                if not isinstance(exc.code, (int, type(None))):
+                    print(exc.code, file=sys.stderr)
+    finally:
+        sys.argv = saved_argv
+        torch.set_num_threads(threads)
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+    return Result([package, *argv], int(code or 0), out.getvalue(), err.getvalue())
+
+
+def run_process(package: str, *args: object, timeout: float = 300) -> Result:
+    """``python -m <package> *args`` in a new interpreter, as a user's shell runs it."""
+    argv = [str(a) for a in args]
+    proc = subprocess.run([sys.executable, "-m", package, *argv], capture_output=True, text=True, timeout=timeout)
+    return Result([package, *argv], proc.returncode, proc.stdout, proc.stderr)
+
+
+def command(package: str, *args: object, check: bool = True, process: bool = False) -> Result:
+    """Run ``python -m <package> *args`` (in this process unless ``process``); with ``check``, a non-zero exit
+    fails the test with the command's stderr."""
+    result = (run_process if process else run_main)(package, *args)
+    if check and result.returncode != 0:
+        raise AssertionError(f"{package} {' '.join(result.args[1:])} failed ({result.returncode}):\n{result.stderr}")
+    return result
