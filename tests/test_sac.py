@@ -117,7 +117,8 @@ def test_a_short_run_on_pendulum_clearly_beats_random():
     # RL Zoo's Pendulum step sizes, 1e-3 (at the paper's 3e-4 it takes about twice as long)
     cfg = sac.Config(hidden=(64, 64), learning_starts=500, batch_size=64, buffer_size=10_000, eval_every=1000,
                      actor_lr=1e-3, critic_lr=1e-3, alpha_lr=1e-3)
-    result = sac.train("Pendulum-v1", cfg, steps=5_000, seed=0)
+    # at 4,000 steps seeds 0, 1 and 2 score about -180, -150 and -170 here, alpha near 0.22 (a random policy: -1,200)
+    result = sac.train("Pendulum-v1", cfg, steps=4_000, seed=0)
     returns = evaluate_policy(result.policy, make_env("Pendulum-v1"), episodes=5, seed=3)
     assert returns.mean() > -600, returns
     assert result.alphas[-1] < 1.0  # Pendulum's policy got more certain than the target entropy asks: alpha fell
