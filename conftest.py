@@ -122,22 +122,3 @@ try:
     ChapterNotebook = _chapter_notebook_class()
 except ImportError:  # nbval not installed: plain `pytest` still runs the unit tests
     ChapterNotebook = None
-
-
-ONE_AT_A_TIME = {"tests/test_cluster.py": "ray", "tests/test_cluster_nodes.py": "ray"}
-"""Test modules that share a scope of ``--dist loadscope`` (pyproject.toml): each starts a local Ray cluster, and two
-of them at once on two cores slow each other down past their bounds, so one pytest-xdist process runs them one
-after the other."""
-
-
-def pytest_xdist_make_scheduler(config: pytest.Config, log):
-    """``--dist loadscope`` (the default here) with the modules of :data:`ONE_AT_A_TIME` in one scope each."""
-    if config.getvalue("dist") != "loadscope":
-        return None
-    from xdist.scheduler import LoadScopeScheduling
-
-    class Scheduling(LoadScopeScheduling):
-        def _split_scope(self, nodeid: str) -> str:
-            return ONE_AT_A_TIME.get(nodeid.split("::", 1)[0], "") or super()._split_scope(nodeid)
-
-    return Scheduling(config, log)
