@@ -15,6 +15,7 @@ import io
 import signal
 import subprocess
 import sys
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +32,27 @@ class Result:
     stderr: str
 
 
+INTERPRETER_FILTERS = (("default", DeprecationWarning, "__main__"), ("ignore", DeprecationWarning, ""),
+                       ("ignore", PendingDeprecationWarning, ""), ("ignore", ImportWarning, ""),
+                       ("ignore", ResourceWarning, ""))
+"""The warning filters a new interpreter starts with (Python's defaults, no ``-W``), last applied first."""
+
+
+@contextlib.contextmanager
+def warnings_as_a_new_interpreter_shows_them():
+    """Inside, warnings are filtered as in a new interpreter and written to ``sys.stderr`` (pytest would otherwise
+    record them apart), so that a warning the command would print is in its captured stderr."""
+    def show(message, category, filename, lineno, file=None, line=None):
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+    with warnings.catch_warnings():
+        warnings.resetwarnings()
+        for action, category, module in reversed(INTERPRETER_FILTERS):
+            warnings.filterwarnings(action, category=category, module=module)
+        warnings.showwarning = show
+        yield
+
+
 def _main(package: str):
     if package == "rlcore":
         from rlcore.__main__ import main
@@ -43,8 +65,8 @@ def _main(package: str):
 
 def run_main(package: str, *args: object) -> Result:
     """``python -m <package> *args`` without a new interpreter: its ``main`` in this process, ``sys.argv`` as
-    ``python -m`` sets it, stdout and stderr captured; the signal handlers and torch's thread count a command sets
-    are put back after it."""
+    ``python -m`` sets it, warnings shown as a new interpreter shows them, stdout and stderr captured; the signal
+    handlers and torch's thread count a command sets are put back after it."""
     import torch
 
     argv = [str(a) for a in args]
@@ -53,7 +75,8 @@ def run_main(package: str, *args: object) -> Result:
     threads, saved_argv = torch.get_num_threads(), sys.argv
     sys.argv = [str(ROOT / package / "__main__.py"), *argv]
     try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+                warnings_as_a_new_interpreter_shows_them():
             try:
                 code = _main(package)(argv)
             except SystemExit as exc:  # argparse's refusals and --help exit
