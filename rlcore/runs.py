@@ -73,7 +73,9 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
     No ``out``: ``(None, None)``. A folder with a checkpoint of the same algorithm, environment and seed
     is resumed: its CSV logs lose the rows past the checkpoint's step and ``meta.json`` records the resume
     (step, time, machine, versions, commit) under ``resumes``. One of another run is an error. A new folder
-    gets ``config.json`` and ``meta.json`` (``meta`` adds fields to the latter).
+    gets ``config.json`` and ``meta.json`` (``meta`` adds fields to the latter); a folder without a checkpoint is a
+    new one, and the CSV logs and best policy of an attempt stopped there before its first checkpoint are removed,
+    so that the run's logs hold each step once.
 
     ``schedules`` names what the step budget shapes in this run (``"epsilon's decay"``), if anything. Such a
     run resumes only with the budget it started with: another ``steps`` would bend the schedule mid-run. A run
@@ -118,6 +120,8 @@ def open_run(out: str | os.PathLike | None, algo: str, env_id: str, seed: int, s
             record.setdefault("resumes", []).append({k: resume[k] for k in RESUME_FIELDS if k in resume})
             write_json(run.meta, record)
         return run, ckpt
+    for stale in (*run.root.glob("*.csv"), run.best_policy):  # an attempt stopped before its first checkpoint:
+        stale.unlink(missing_ok=True)                          # this run starts over, so do its logs
     write_json(run.config, {"algo": algo, "env_id": env_id, "seed": seed, "steps": steps,
                             "config": config_dict(config)})
     write_json(run.meta, run_metadata(algo=algo, env_id=env_id, seed=seed, steps=steps, **meta))

@@ -207,3 +207,24 @@ def test_the_cli_refuses_a_bad_thread_count_without_a_traceback(tmp_path, monkey
     assert "Traceback" not in proc.stderr
     assert proc.stderr.strip().splitlines() == ["error: RLCORE_TORCH_THREADS='many': give a whole number of threads, 1 "
                                                 "or more"]
+
+
+def test_a_run_started_over_where_an_attempt_stopped_before_its_first_checkpoint_logs_each_step_once(tmp_path):
+    import torch
+
+    from rlcore.dqn import Config, train
+    from rlcore.logger import read_csv
+
+    torch.set_num_threads(1)
+    small = dict(hidden=(16,), learning_starts=50, checkpoint_every=10 ** 6)
+    train("CartPole-v1", Config(**small, eval_every=0), steps=300, seed=0, out=tmp_path / "whole")
+    out = tmp_path / "again"
+    train("CartPole-v1", Config(**small, eval_every=100), steps=300, seed=0, out=out)
+    (out / "checkpoint.pt").unlink()  # as if stopped (SIGKILL) before its first checkpoint: logs, no checkpoint
+    assert (out / "eval.csv").exists() and (out / "policy_best.pt").exists()
+    train("CartPole-v1", Config(**small, eval_every=0), steps=300, seed=0, out=out)  # starts over
+    whole, again = read_csv(tmp_path / "whole" / "progress.csv"), read_csv(out / "progress.csv")
+    assert len(read_csv(out / "eval.csv").get("step", [])) == 0 and not (out / "policy_best.pt").exists()
+    assert again.keys() == whole.keys() and len(again["step"]) == len(whole["step"]) > 0
+    for column in ("step", "episode_return"):
+        assert list(again[column]) == list(whole[column]), column
