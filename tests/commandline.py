@@ -11,11 +11,14 @@ command line) starts one with ``process=True``.
 from __future__ import annotations
 
 import contextlib
+import importlib
+import importlib.util
 import io
 import signal
 import subprocess
 import sys
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,18 +56,18 @@ def warnings_as_a_new_interpreter_shows_them():
         yield
 
 
-def _main(package: str):
-    if package == "rlcore":
-        from rlcore.__main__ import main
-    elif package == "rlbook":
-        from rlbook.__main__ import main
-    else:
-        raise ValueError(f"no command line {package!r}")
-    return main
+def entry(module: str) -> tuple[Callable[[list[str]], int], Path]:
+    """The ``main`` that ``python -m <module>`` runs (a package's ``__main__``, else the module's own), and its file."""
+    spec = importlib.util.find_spec(module)
+    if spec.submodule_search_locations is not None:  # a package: python -m runs its __main__
+        module = f"{module}.__main__"
+        spec = importlib.util.find_spec(module)
+    return importlib.import_module(module).main, Path(spec.origin)
 
 
 def run_main(package: str, *args: object) -> Result:
-    """``python -m <package> *args`` without a new interpreter: its ``main`` in this process, ``sys.argv`` as
+    """``python -m <package> *args`` (a package or a module) without a new interpreter: its ``main`` in this
+    process, ``sys.argv`` as
     ``python -m`` sets it, warnings shown as a new interpreter shows them, stdout and stderr captured; the signal
     handlers and torch's thread count a command sets are put back after it."""
     import torch
@@ -72,17 +75,19 @@ def run_main(package: str, *args: object) -> Result:
     argv = [str(a) for a in args]
     out, err = io.StringIO(), io.StringIO()
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    main, path = entry(package)
     threads, saved_argv = torch.get_num_threads(), sys.argv
-    sys.argv = [str(ROOT / package / "__main__.py"), *argv]
+    sys.argv = [str(path), *argv]
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
                 warnings_as_a_new_interpreter_shows_them():
             try:
-                code = _main(package)(argv)
-            except SystemExit as exc:  # argparse's refusals and --help exit
-                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-                if not isinstance(exc.code, (int, type(None))):
-                    print(exc.code, file=sys.stderr)
+                code = main(argv)
+            except SystemExit as exc:  # argparse's refusals and --help; a message exits 1, as Python prints it
+                code = exc.code
+                if code is not None and not isinstance(code, int):
+                    print(code, file=sys.stderr)
+                    code = 1
     finally:
         sys.argv = saved_argv
         torch.set_num_threads(threads)

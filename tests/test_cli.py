@@ -205,44 +205,28 @@ BAD_EXPERIMENTS_INPUT = [  # python -m rlbook, the book's command line
 
 @pytest.mark.parametrize("args, message", BAD_INPUT + BAD_EXPERIMENTS_INPUT,
                          ids=[" ".join(a[:2] + a[-2:]) for a, _ in BAD_INPUT + BAD_EXPERIMENTS_INPUT])
-def test_every_bad_value_is_one_line_before_any_work(args, message, tmp_path, capsys, monkeypatch):
-    if args[0] == "experiments":
-        from rlbook.__main__ import main
-    else:
-        from rlcore.__main__ import main
-
+def test_every_bad_value_is_one_line_before_any_work(args, message, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "run"
     argv = [*args, "--out", str(out)] if args[0] == "train" else args
-    try:
-        code = main(argv)
-    except SystemExit as exc:  # argparse's refusal
-        code = exc.code
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert message in err and "Traceback" not in err
-    assert len(err.strip().splitlines()) == 1, err
+    proc = command("rlbook" if args[0] == "experiments" else "rlcore", *argv, check=False)
+    assert proc.returncode == 2, proc.stderr
+    assert message in proc.stderr and "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert not out.exists() and not (tmp_path / "runs").exists()  # refused before any work
 
 
-def test_the_library_points_to_the_book_for_experiments(capsys):
-    from rlcore.__main__ import main
-
-    assert main(["experiments", "run", "dqn-cartpole", "--jobs", "2"]) == 2
-    err = capsys.readouterr().err
-    assert err.strip() == ("error: the book's experiments are run by "
-                           "`python -m rlbook experiments run dqn-cartpole --jobs 2`")
+def test_the_library_points_to_the_book_for_experiments():
+    proc = rlcore("experiments", "run", "dqn-cartpole", "--jobs", "2", check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == ("error: the book's experiments are run by "
+                                   "`python -m rlbook experiments run dqn-cartpole --jobs 2`")
 
 
-def test_dppo_refuses_bad_values_the_same_way(tmp_path, capsys):
-    from rlcore.dppo import main
-
-    try:
-        code = main(["--env", "Pendulum-v1", "--steps", "0", "--out", str(tmp_path / "d")])
-    except SystemExit as exc:
-        code = exc.code
-    err = capsys.readouterr().err
-    assert code == 2 and "--steps: expected an integer >= 1, got 0" in err and len(err.strip().splitlines()) == 1
+def test_dppo_refuses_bad_values_the_same_way(tmp_path):
+    proc = command("rlcore.dppo", "--env", "Pendulum-v1", "--steps", "0", "--out", tmp_path / "d", check=False)
+    assert proc.returncode == 2 and "--steps: expected an integer >= 1, got 0" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
 
 
 def test_evaluate_and_render_take_a_results_folder_with_its_policy(frozenlake_run, tmp_path):

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from commandline import command
 from rlbook import critic_trace
 from rlcore import ddpg
 from rlcore.offpolicy import Minibatch
@@ -100,14 +101,11 @@ def test_a_stored_trace_loads_as_arrays(tmp_path):
     (["ddpg-modern-1m/humanoid", "--seeds", "x", "--steps", "10"], "comma-separated"),
     (["ddpg-modern-1m/humanoid", "--seeds", "0", "--steps", "10", "--set", "critic_rate=1"], "no field"),
 ])
-def test_the_command_line_refuses_bad_input_in_one_line(tmp_path, capsys, argv, message):
+def test_the_command_line_refuses_bad_input_in_one_line(tmp_path, argv, message):
     out = tmp_path / "t.json"
-    try:
-        code = critic_trace.main([*argv, "--out", str(out)])
-    except SystemExit as exc:  # argparse's own refusals
-        code = exc.code
-    err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and err[0].startswith("error:") and message in err[0], err
+    proc = command("rlbook.critic_trace", *argv, "--out", out, check=False)
+    err = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(err) == 1 and err[0].startswith("error:") and message in err[0], err
     assert not out.exists()
 
 
